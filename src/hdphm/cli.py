@@ -1,0 +1,62 @@
+"""The one command-line entry point, ``hdphm``.
+
+Each package contributes its sub-commands through a module with a
+``register(subparsers)`` function; this file only lists those modules, so a
+newcomer finds a command's code by its package. Registration must stay cheap:
+heavy imports (torch, rclpy, onnxruntime) belong inside the handlers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import sys
+
+#: Modules that add sub-commands, in the order ``hdphm --help`` shows them.
+COMMAND_MODULES = (
+    "hdphm.demo_cli",        # demo: the README's main job
+    "hd_sim.cli",            # sim fleet | sim mission | sim effects
+    "hd_bag.cli",            # validate, import-csv, inspect
+    "hd_twin.cli",           # train, tune, twin eval|export|show
+    "hd_prognostic.cli",     # prognose, metrics, prognostic eval
+    "hd_ground.cli",         # discover, ground ...
+    "hdphm.ros_cli",         # node, stack, replay, record
+    "hdphm.bench_cli",       # bench
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="hdphm",
+        description="Harmonic-drive PHM stack: simulate, train the twin, monitor, prognose, discover.",
+    )
+    from hdphm import __version__
+
+    parser.add_argument("--version", action="version", version=f"hdphm {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        # A package whose command module is not written yet is simply absent;
+        # an import error inside an existing module is a real error and raises.
+        if importlib.util.find_spec(name) is None:
+            continue
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        rc = args.func(args)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    return int(rc or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
