@@ -1,12 +1,22 @@
 #!/usr/bin/env bash
-# Creates .venv and installs hdphm with its pinned dependencies (idempotent).
+# Creates .venv and installs hdphm with its pinned dependencies.
+# Idempotent: re-installs only when pyproject.toml changed since the last run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
 if [ ! -x .venv/bin/python ]; then
+  echo "[setup] creating .venv with $($PY --version)"
   "$PY" -m venv .venv
 fi
+stamp=.venv/.hdphm-installed
+want=$(sha256sum pyproject.toml | cut -d' ' -f1)
+if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ] && .venv/bin/python -c "import hdphm" 2>/dev/null; then
+  exit 0
+fi
+echo "[setup] installing dependencies into .venv (first time: several minutes)"
 .venv/bin/python -m pip install -q --upgrade pip
-# torch first, pinned, so nothing pulls a CUDA build
+# torch first and pinned: any other version pulls gigabytes of CUDA packages
 .venv/bin/python -m pip install -q "torch==2.13.0"
 .venv/bin/python -m pip install -q -e ".[dev]"
+echo "$want" > "$stamp"
+echo "[setup] done"
