@@ -1,0 +1,336 @@
+"""Additive model terms: the one format shared by the twin physics and discovery.
+
+A *term* is a JSON-serialisable dict that adds a linear combination of basis
+functions to the model of one measured signal (``tau_m`` or ``Q_red``)::
+
+    {
+      "name": "position_periodic_friction",   # canonical PHYSICS.md section 7 name, or "unknown"
+      "signal": "tau_m",                      # the measured signal whose model it adds to
+      "variable": "theta_m",                  # what it depends on
+      "order": 2,                             # cycles per revolution of ``variable`` or None
+      "form": "F_2 sin(2 theta_m + rho_2) sgn(omega_m)",   # human-readable formula
+      "basis": [ {basis spec}, ... ],         # composable basis functions (below)
+      "coef": [c_0, c_1, ...],                # one coefficient per basis function, SI units
+      "parameters": {"F_2": 0.03, "rho_2": 1.1}  # the same term in physically named parameters
+    }
+
+The term's value is ``sum_i coef[i] * basis_i(signals)`` in N*m (the unit of
+its ``signal``).  ``evaluate_terms(terms, signals, xp=numpy)`` evaluates a list
+of terms on numpy arrays or, with ``xp=torch``, on torch tensors (so the PINN's
+physics residual can carry the same terms, differentiably).
+
+Basis specs (``signals`` keys: theta_m, theta_f, omega_m, omega_f, tau_m,
+Q_red, temperature, i_q, alpha_m, alpha_f, phi, ...; angles rad, speeds rad/s,
+torques N*m, temperature degC, currents A):
+
+================================================  =============================================
+spec                                              value
+================================================  =============================================
+``{"op": "const"}``                               1
+``{"op": "var", "var": v}``                       v
+``{"op": "sin", "var": v, "k": k}``               sin(k v)           (k may be fractional)
+``{"op": "cos", "var": v, "k": k}``               cos(k v)
+``{"op": "sgn", "var": v, "eps": e}``             sgn(v); tanh(v / e) when e > 0 (smooth, differentiable)
+``{"op": "abs", "var": v}``                       abs(v)
+``{"op": "pow", "var": v, "p": p}``               v ** p (odd-symmetric sign(v) abs(v)**p if ``"odd": true``)
+``{"op": "offset", "var": v, "ref": r}``          v - r              (e.g. temperature - T_ref)
+``{"op": "stribeck", "var": v, "v_s": s,          exp(-(abs(v)/s)**delta) * sgn(v)
+   "delta": d, "eps": e}``
+``{"op": "exp_decay", "var": v, "v_s": s,         exp(-(abs(v)/s)**delta)
+   "delta": d}``
+``{"op": "prod", "factors": [spec, ...]}``        product of the factors
+================================================  =============================================
+
+Everything here is pure and array-namespace agnostic: ``xp`` must provide
+``sin, cos, tanh, sign, abs, exp, ones_like``; both ``numpy`` and ``torch`` do.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+#: Canonical effect names (PHYSICS.md section 7). ``"unknown"`` is also valid
+#: for a term that fits none of them (reported with variable/order/form).
+CATALOG_NAMES = (
+    "coulomb_friction",
+    "viscous_friction",
+    "stribeck_friction",
+    "temperature_dependent_friction",
+    "load_dependent_friction",
+    "position_periodic_friction",
+    "position_periodic_torque",
+    "kinematic_error_harmonic",
+    "position_dependent_stiffness",
+    "nonlinear_stiffness",
+    "hysteresis",
+    "backlash",
+    "cogging_torque",
+    "current_ripple",
+    "motor_thermal_drift",
+)
+TARGET_SIGNALS = ("tau_m", "Q_red")
+BASIS_OPS = ("const", "var", "sin", "cos", "sgn", "abs", "pow", "offset", "stribeck", "exp_decay", "prod")
+
+# ---------------------------------------------------------------------------
+# validation
+# ---------------------------------------------------------------------------
+
+
+def _finite_number(x: Any, what: str) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected a number, got {x!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{what}: must be finite, got {v!r}")
+    return v
+
+
+def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
+    """Raise ``ValueError`` naming ``where`` and the problem if ``spec`` is malformed."""
+    if not isinstance(spec, Mapping):
+        raise ValueError(f"{where}: a basis spec must be a dict, got {type(spec).__name__}")
+    op = spec.get("op")
+    if op not in BASIS_OPS:
+        raise ValueError(f"{where}: unknown basis op {op!r}; one of {BASIS_OPS}")
+    if op == "const":
+        return
+    if op == "prod":
+        factors = spec.get("factors")
+        if not isinstance(factors, list) or not factors:
+            raise ValueError(f"{where}: 'prod' needs a non-empty list 'factors'")
+        for i, f in enumerate(factors):
+            validate_basis(f, f"{where}.factors[{i}]")
+        return
+    if not isinstance(spec.get("var"), str) or not spec["var"]:
+        raise ValueError(f"{where}: op {op!r} needs a signal name in 'var'")
+    if op in ("sin", "cos"):
+        _finite_number(spec.get("k"), f"{where}: 'k' of {op}")
+    elif op == "pow":
+        _finite_number(spec.get("p"), f"{where}: 'p' of pow")
+    elif op == "offset":
+        _finite_number(spec.get("ref", 0.0), f"{where}: 'ref' of offset")
+    elif op in ("stribeck", "exp_decay"):
+        s = _finite_number(spec.get("v_s"), f"{where}: 'v_s' of {op}")
+        d = _finite_number(spec.get("delta", 1.0), f"{where}: 'delta' of {op}")
+        if s <= 0 or d <= 0:
+            raise ValueError(f"{where}: {op} needs v_s > 0 and delta > 0, got v_s={s}, delta={d}")
+    if op in ("sgn", "stribeck"):
+        e = _finite_number(spec.get("eps", 0.0), f"{where}: 'eps' of {op}")
+        if e < 0:
+            raise ValueError(f"{where}: 'eps' must be >= 0, got {e}")
+
+
+def validate_term(term: Mapping[str, Any], where: str = "term") -> None:
+    """Raise ``ValueError`` naming the term and the problem if it is malformed."""
+    if not isinstance(term, Mapping):
+        raise ValueError(f"{where}: a term must be a dict, got {type(term).__name__}")
+    name = term.get("name")
+    where = f"{where} {name!r}"
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"{where}: 'name' must be a non-empty string")
+    if term.get("signal") not in TARGET_SIGNALS:
+        raise ValueError(f"{where}: 'signal' must be one of {TARGET_SIGNALS}, got {term.get('signal')!r}")
+    basis = term.get("basis")
+    if not isinstance(basis, list) or not basis:
+        raise ValueError(f"{where}: 'basis' must be a non-empty list of basis specs")
+    for i, b in enumerate(basis):
+        validate_basis(b, f"{where}.basis[{i}]")
+    coef = term.get("coef")
+    if coef is None or len(coef) != len(basis):
+        n = None if coef is None else len(coef)
+        raise ValueError(f"{where}: 'coef' needs {len(basis)} numbers (one per basis function), got {n}")
+    if not _is_tensor(coef):
+        for i, c in enumerate(coef):
+            _finite_number(c, f"{where}.coef[{i}]")
+    order = term.get("order")
+    if order is not None:
+        _finite_number(order, f"{where}: 'order'")
+
+
+def _is_tensor(x: Any) -> bool:
+    return type(x).__module__.startswith("torch")
+
+
+# ---------------------------------------------------------------------------
+# evaluation
+# ---------------------------------------------------------------------------
+
+
+def _get(signals: Mapping[str, Any], var: str, where: str):
+    try:
+        return signals[var]
+    except KeyError:
+        raise KeyError(
+            f"{where}: signal {var!r} is needed but not available; have {sorted(signals)}"
+        ) from None
+
+
+def _ref_signal(signals: Mapping[str, Any]):
+    for v in signals.values():
+        if hasattr(v, "shape") and len(getattr(v, "shape", ())) >= 1:
+            return v
+    raise ValueError("evaluate: no array signal to take the sample shape from")
+
+
+def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, where: str = "basis"):
+    """Value of one basis function on ``signals`` (arrays of one shape), same namespace as ``xp``."""
+    op = spec["op"]
+    if op == "const":
+        return xp.ones_like(_ref_signal(signals))
+    if op == "prod":
+        out = None
+        for i, f in enumerate(spec["factors"]):
+            v = evaluate_basis(f, signals, xp, f"{where}.factors[{i}]")
+            out = v if out is None else out * v
+        return out
+    x = _get(signals, spec["var"], where)
+    if op == "var":
+        return x * 1.0
+    if op == "sin":
+        return xp.sin(float(spec["k"]) * x)
+    if op == "cos":
+        return xp.cos(float(spec["k"]) * x)
+    if op == "sgn":
+        return _sgn(x, float(spec.get("eps", 0.0)), xp)
+    if op == "abs":
+        return xp.abs(x)
+    if op == "pow":
+        p = float(spec["p"])
+        if spec.get("odd"):
+            return xp.sign(x) * xp.abs(x) ** p
+        return x**p
+    if op == "offset":
+        return x - float(spec.get("ref", 0.0))
+    if op in ("stribeck", "exp_decay"):
+        s, d = float(spec["v_s"]), float(spec.get("delta", 1.0))
+        decay = xp.exp(-((xp.abs(x) / s) ** d))
+        if op == "exp_decay":
+            return decay
+        return decay * _sgn(x, float(spec.get("eps", 0.0)), xp)
+    raise ValueError(f"{where}: unknown basis op {op!r}")  # pragma: no cover (validated)
+
+
+def _sgn(x, eps: float, xp):
+    return xp.tanh(x / eps) if eps > 0 else xp.sign(x)
+
+
+def basis_matrix(basis: Iterable[Mapping[str, Any]], signals: Mapping[str, Any], xp=np):
+    """Columns of the basis functions, shape (n_samples, n_basis) (numpy or torch)."""
+    cols = [evaluate_basis(b, signals, xp, f"basis[{i}]") for i, b in enumerate(basis)]
+    return xp.stack(cols, -1)
+
+
+def evaluate_term(term: Mapping[str, Any], signals: Mapping[str, Any], xp=np):
+    """Value of one term, N*m: ``sum_i coef[i] * basis_i(signals)``."""
+    out = None
+    name = term.get("name", "?")
+    for i, (b, c) in enumerate(zip(term["basis"], term["coef"])):
+        v = evaluate_basis(b, signals, xp, f"term {name!r}.basis[{i}]")
+        v = v * (c if _is_tensor(c) else float(c))
+        out = v if out is None else out + v
+    return out
+
+
+def evaluate_terms(terms: list[Mapping[str, Any]], signals: Mapping[str, Any], xp=np, *, signal: str | None = None):
+    """Sum of ``terms`` on ``signals`` (numpy arrays with ``xp=numpy``, tensors with ``xp=torch``).
+
+    ``signal`` restricts the sum to the terms that add to that measured signal
+    (``"tau_m"`` or ``"Q_red"``); ``None`` sums them all. With no (matching)
+    term the result is zeros of the signals' sample shape. Raises ``ValueError``
+    on a malformed term and ``KeyError`` naming the term and the missing signal.
+    """
+    out = None
+    for j, t in enumerate(terms):
+        validate_term(t, f"terms[{j}]")
+        if signal is not None and t["signal"] != signal:
+            continue
+        v = evaluate_term(t, signals, xp)
+        out = v if out is None else out + v
+    if out is None:
+        out = xp.zeros_like(_ref_signal(signals))
+    return out
+
+
+def required_signals(terms: Iterable[Mapping[str, Any]]) -> set[str]:
+    """Names of the signals a list of terms reads."""
+    need: set[str] = set()
+
+    def walk(b):
+        if b["op"] == "prod":
+            for f in b["factors"]:
+                walk(f)
+        elif b["op"] != "const":
+            need.add(b["var"])
+
+    for t in terms:
+        for b in t["basis"]:
+            walk(b)
+    return need
+
+
+# ---------------------------------------------------------------------------
+# helpers for building terms and naming their parameters
+# ---------------------------------------------------------------------------
+
+
+def harmonic_amplitude_phase(a_sin: float, a_cos: float) -> tuple[float, float]:
+    """``a_sin sin(x) + a_cos cos(x) = A sin(x + psi)``: returns (A, psi), psi in (-pi, pi]."""
+    return float(math.hypot(a_sin, a_cos)), float(math.atan2(a_cos, a_sin))
+
+
+def sin_cos_pair(var: str, k: float, times: Mapping[str, Any] | None = None) -> list[dict]:
+    """Basis [sin(k var), cos(k var)], each optionally multiplied by the factor spec ``times``."""
+    s = {"op": "sin", "var": var, "k": k}
+    c = {"op": "cos", "var": var, "k": k}
+    if times is None:
+        return [s, c]
+    return [{"op": "prod", "factors": [s, copy.deepcopy(dict(times))]}, {"op": "prod", "factors": [c, copy.deepcopy(dict(times))]}]
+
+
+def make_term(
+    name: str,
+    signal: str,
+    basis: list[dict],
+    coef: Iterable[float],
+    *,
+    variable: str | None = None,
+    order: int | float | None = None,
+    form: str = "",
+    parameters: Mapping[str, float] | None = None,
+) -> dict:
+    """Build and validate a term dict (plain Python types, JSON-ready)."""
+    term = {
+        "name": name,
+        "signal": signal,
+        "variable": variable,
+        "order": None if order is None else (int(order) if float(order).is_integer() else float(order)),
+        "form": form,
+        "basis": copy.deepcopy(list(basis)),
+        "coef": [float(c) for c in coef],
+        "parameters": {k: float(v) for k, v in (parameters or {}).items()},
+    }
+    validate_term(term)
+    return term
+
+
+def terms_to_json(terms: list[Mapping[str, Any]]) -> str:
+    """Serialise (validates first)."""
+    for j, t in enumerate(terms):
+        validate_term(t, f"terms[{j}]")
+    return json.dumps(list(terms), indent=1)
+
+
+def terms_from_json(text: str) -> list[dict]:
+    """Parse and validate a JSON list of terms."""
+    terms = json.loads(text)
+    if not isinstance(terms, list):
+        raise ValueError("terms JSON must be a list of term dicts")
+    for j, t in enumerate(terms):
+        validate_term(t, f"terms[{j}]")
+    return terms
