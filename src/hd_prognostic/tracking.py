@@ -1,0 +1,163 @@
+"""Run a filter over one unit's observation sequence and record the RUL history.
+
+The same loop serves the harmonic-drive actuators (one step per mission),
+the NASA battery cells (one step per cycle) and the Virkler specimens (one
+step per inspection): ``times[k]`` is the time of observation ``obs[k]``
+(NaN = missing: predict-only), ``exposure[k]`` what drove degradation since
+the previous observation. A RUL distribution is computed at every step from
+``t_start`` on.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from hd_prognostic.models import DegradationModel
+from hd_prognostic.pf import ParticleFilter, weighted_quantile
+from hd_prognostic.rul import FutureExposure, RULResult, rul_distribution
+
+
+@dataclass
+class RULHistory:
+    """Per-step filter summaries and RUL predictions of one unit."""
+
+    unit: str
+    time_unit: str
+    t: list[float] = field(default_factory=list)
+    z: list[float] = field(default_factory=list)
+    state_mean: list[list[float]] = field(default_factory=list)
+    state_p5: list[list[float]] = field(default_factory=list)
+    state_p95: list[list[float]] = field(default_factory=list)
+    ess: list[float] = field(default_factory=list)
+    rul_t: list[float] = field(default_factory=list)
+    p5: list[float] = field(default_factory=list)
+    p50: list[float] = field(default_factory=list)
+    p95: list[float] = field(default_factory=list)
+    mean: list[float] = field(default_factory=list)
+    samples: list[np.ndarray] = field(default_factory=list)  # kept in memory (thinned), not in JSON
+    state_names: tuple[str, ...] = ()
+    threshold: float = float("nan")
+    meta: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        d = {k: getattr(self, k) for k in ("unit", "time_unit", "t", "z", "state_mean", "state_p5", "state_p95",
+                                           "ess", "rul_t", "p5", "p50", "p95", "mean", "threshold", "meta")}
+        d["state_names"] = list(self.state_names)
+        return _clean(d)
+
+    @classmethod
+    def from_json(cls, d: dict) -> "RULHistory":
+        h = cls(unit=d["unit"], time_unit=d.get("time_unit", "step"))
+        for k in ("t", "z", "state_mean", "state_p5", "state_p95", "ess", "rul_t", "p5", "p50", "p95", "mean"):
+            setattr(h, k, [(_unclean(v)) for v in d.get(k, [])])
+        h.state_names = tuple(d.get("state_names", ()))
+        h.threshold = _unclean(d.get("threshold"))
+        h.meta = d.get("meta", {})
+        return h
+
+
+def _clean(o):
+    """JSON-safe: inf/NaN -> strings, numpy -> python."""
+    if isinstance(o, dict):
+        return {k: _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple, np.ndarray)):
+        return [_clean(v) for v in o]
+    if isinstance(o, (float, np.floating)):
+        f = float(o)
+        return f if np.isfinite(f) else ("inf" if f > 0 else "-inf" if f < 0 else "nan")
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    return o
+
+
+def _unclean(o):
+    if isinstance(o, list):
+        return [_unclean(v) for v in o]
+    if o in ("inf", "-inf", "nan"):
+        return float(o)
+    return o
+
+
+def track(
+    model: DegradationModel,
+    times: np.ndarray,
+    obs: np.ndarray,
+    exposure: np.ndarray,
+    future: FutureExposure | Callable[[int], FutureExposure],
+    *,
+    rul_step: float = 1.0,
+    max_steps: int = 1000,
+    t_start: float = -np.inf,
+    unit: str = "unit",
+    pf: ParticleFilter | None = None,
+    pf_kwargs: dict | None = None,
+    keep_samples: int = 2000,
+    rul_particles: int | None = None,
+    progress: bool = False,
+) -> RULHistory:
+    """Filter ``obs`` and predict RUL at each step with ``times[k] >= t_start``.
+
+    ``future`` is the exposure per future RUL step, or a callable ``k ->
+    future`` giving it from the data seen up to step ``k`` (e.g. bootstrap
+    from the unit's own past loads). ``rul_particles`` thins the particle set
+    for the RUL propagation (default: all).
+    """
+    times = np.asarray(times, float)
+    obs = np.asarray(obs, float)
+    exposure = np.asarray(exposure, float)
+    if not (len(times) == len(obs) == len(exposure)):
+        raise ValueError(f"{unit}: times, obs and exposure lengths differ ({len(times)}, {len(obs)}, {len(exposure)})")
+    if len(times) and np.any(np.diff(times) < 0):
+        raise ValueError(f"{unit}: observation times are not sorted")
+    pf = pf or ParticleFilter(model, **(pf_kwargs or {}))
+    hist = RULHistory(unit=unit, time_unit=model.time_unit, state_names=model.state_names,
+                      threshold=float(model.threshold))
+    t0 = _time.perf_counter()
+    for k in range(len(times)):
+        pf.step(exposure[k], obs[k])
+        w = pf.weights
+        hist.t.append(float(times[k]))
+        hist.z.append(float(obs[k]))
+        hist.state_mean.append(pf.mean().tolist())
+        qs = np.array([weighted_quantile(pf.x[:, j], w, [0.05, 0.95]) for j in range(model.n_states)])
+        hist.state_p5.append(qs[:, 0].tolist())
+        hist.state_p95.append(qs[:, 1].tolist())
+        hist.ess.append(pf.ess())
+        if times[k] >= t_start:
+            fut = future(k) if callable(future) and _is_step_fn(future) else future
+            if rul_particles and rul_particles < pf.n:
+                xs, ws = pf.resampled_particles()[:rul_particles], None
+            else:
+                xs, ws = pf.x, w
+            r: RULResult = rul_distribution(model, xs, ws, fut, rul_step, max_steps, pf.rng)
+            hist.rul_t.append(float(times[k]))
+            hist.p5.append(r.p5)
+            hist.p50.append(r.p50)
+            hist.p95.append(r.p95)
+            hist.mean.append(r.mean)
+            if keep_samples:
+                sel = np.random.default_rng(k).choice(len(r.samples), min(keep_samples, len(r.samples)),
+                                                      replace=True, p=r.weights)  # equally weighted draws
+                hist.samples.append(r.samples[sel])
+        if progress and (k % 10 == 0 or k == len(times) - 1):
+            print(f"  {unit}: step {k + 1}/{len(times)}  ESS {pf.ess():.0f}  "
+                  f"{_time.perf_counter() - t0:.1f} s", flush=True)
+    hist.meta["n_resample"] = pf.n_resample
+    hist.meta["n_particles"] = pf.n
+    return hist
+
+
+def _is_step_fn(f) -> bool:
+    """A callable future taking one argument (the step index) rather than (k, n, rng)."""
+    import inspect
+
+    try:
+        return len(inspect.signature(f).parameters) == 1
+    except (TypeError, ValueError):
+        return False
