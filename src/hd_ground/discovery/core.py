@@ -1,0 +1,521 @@
+"""Discovery core: residual -> missing effect -> augmented model, error before/after.
+
+Pure numpy; no ROS, no file I/O (see ``pipeline.py`` for bags, twin dirs,
+plots and the report). Steps, for one measured target signal:
+
+1. Baseline: the twin's physics model of the target with its declared effects
+   (tau_m = J_eq alpha_m + Q_red/(N eta) + T_C sgn(omega_m) + b omega_m + any
+   declared extra terms; Q_red = K phi + c phi'), linear in its parameters,
+   re-identified by least squares on the fit blocks.
+2. Identifiability: what the data can and cannot support (direction changes,
+   speed variation, low-speed data, revolutions, temperature and load range);
+   effects the data cannot identify are not proposed, and the reason is stated.
+3. Residual order spectra (against theta_m, theta_f; plain and times
+   sgn(omega_m)) give the orders to try besides the catalog's low orders.
+4. Candidate groups (``library.py``) are selected by forward group selection
+   with leave-one-block-out cross-validation over the fit blocks: a group is
+   added only if it lowers the cross-validated error by ``min_gain`` of the
+   current error and does so in most folds; a backward pass drops groups that
+   became redundant. Alternatives of one family compete; one survives.
+5. The selected model is refitted on all fit data and scored on the held-out
+   blocks/bags against the baseline.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hd_twin.terms import basis_matrix, evaluate_terms
+
+from .data import Dataset, DiscoveryError
+from .library import Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders
+from .spectrum import OrderSpectrum, analyse_orders
+
+#: Effects the basic twin declares for each target when no twin config is given.
+DEFAULT_DECLARED = {"tau_m": ["coulomb_friction", "viscous_friction"], "Q_red": []}
+
+
+@dataclass
+class Options:
+    min_gain: float = 0.02  # minimum relative drop of the CV error for adding a group
+    fold_majority: float = 0.6  # fraction of folds in which the group must help
+    max_effects: int = 6
+    peak_ratio: float = 6.0  # order-spectrum line threshold over the median floor
+    max_peaks: int = 6
+    angle_offset: str = "none"  # "none" | "estimate": per-bag unknown theta_m offset
+    calib_frac: float = 0.2  # fraction of each held-out bag used to estimate its offset
+    min_samples: int = 1000
+    min_fit_blocks: int = 3
+
+
+@dataclass
+class BaselineColumn:
+    param: str  # physical parameter name (coefficient of the column)
+    effect: str | None  # declared effect name it implements, None for structural terms
+    basis: dict
+    term: dict | None = None  # when it comes from a declared extra term (coefficient scales that term)
+
+
+@dataclass
+class SignalResult:
+    signal: str
+    identifiable: bool
+    statements: list[str]
+    declared_before: list[str]
+    declared_after: list[str]
+    baseline_params: dict
+    refit_baseline_params: dict
+    effects: list[dict]  # report entries, best first
+    terms: list[dict]  # the new extra terms (hd_twin.terms format)
+    error_before: dict
+    error_after: dict
+    spectra: list[OrderSpectrum] = field(default_factory=list)
+    cv_trace: list[dict] = field(default_factory=list)
+    offsets: dict = field(default_factory=dict)  # bag name -> estimated theta_m offset (rad)
+    comparisons: dict = field(default_factory=dict)
+    # arrays for plots (held-out scored rows)
+    plot: dict = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------
+# baseline model
+# ---------------------------------------------------------------------------
+
+
+def _sgn(eps):
+    return {"op": "sgn", "var": "omega_m", "eps": eps}
+
+
+def baseline_columns(target: str, avail: set[str], declared: list[str], extra_terms: list[dict], sgn_eps: float,
+                     twin_params: dict) -> tuple[list[BaselineColumn], list[str]]:
+    """The twin's model of ``target`` as linear-in-parameter columns; plus notes."""
+    notes: list[str] = []
+    cols: list[BaselineColumn] = []
+    if target == "tau_m":
+        cols.append(BaselineColumn("J_eq", None, {"op": "var", "var": "alpha_m"}))
+        if "Q_red_over_N" in avail:
+            cols.append(BaselineColumn("inv_eta", None, {"op": "var", "var": "Q_red_over_N"}))
+        else:
+            notes.append("Q_red not measured: the load path Q_red/(N eta) is absent from the tau_m model")
+        known = {
+            "coulomb_friction": ("T_C", _sgn(sgn_eps)),
+            "viscous_friction": ("b", {"op": "var", "var": "omega_m"}),
+            "load_dependent_friction": ("c_L", {"op": "prod", "factors": [{"op": "abs", "var": "Q_red"}, _sgn(sgn_eps)]}),
+        }
+        if "stribeck_friction" in declared and "omega_s" in twin_params:
+            known["stribeck_friction"] = ("T_S_minus_T_C", {"op": "stribeck", "var": "omega_m",
+                                                            "v_s": float(twin_params["omega_s"]),
+                                                            "delta": float(twin_params.get("delta", 1.0)), "eps": sgn_eps})
+    elif target == "Q_red":
+        cols.append(BaselineColumn("K", None, {"op": "var", "var": "phi"}))
+        cols.append(BaselineColumn("c", None, {"op": "var", "var": "phi_dot"}))
+        known = {}
+    else:
+        raise DiscoveryError(f"unknown target signal {target!r}; one of tau_m, Q_red")
+    term_names = {t["name"] for t in extra_terms if t.get("signal") == target}
+    for eff in declared:
+        if eff in known:
+            p, b = known[eff]
+            cols.append(BaselineColumn(p, eff, b))
+        elif eff not in term_names:
+            notes.append(f"declared effect {eff} has no linear form here and no extra term; it cannot be re-identified")
+    for t in extra_terms:
+        if t.get("signal") != target:
+            continue
+        cols.append(BaselineColumn(f"scale[{t['name']}:{t.get('variable')}:{t.get('order')}]", t["name"], None, t))
+    return cols, notes
+
+
+def _baseline_matrix(cols: list[BaselineColumn], sig: dict) -> np.ndarray:
+    out = []
+    for c in cols:
+        if c.term is not None:
+            out.append(evaluate_terms([c.term], sig))
+        else:
+            out.append(basis_matrix([c.basis], sig)[:, 0])
+    return np.stack(out, 1) if out else np.zeros((len(next(iter(sig.values()))), 0))
+
+
+# ---------------------------------------------------------------------------
+# identifiability
+# ---------------------------------------------------------------------------
+
+
+def identifiability(sig: dict, target: str, avail: set[str]) -> tuple[set[str], list[str], bool]:
+    """(excluded names/families/variables, statements, anything identifiable at all)."""
+    ex: set[str] = set()
+    st: list[str] = []
+    w = sig["omega_m"]
+    aw = np.abs(w)
+    scale = float(np.quantile(aw, 0.9))
+    if scale <= 1e-6:
+        st.append("omega_m: the motor never moves; no friction or position-dependent effect can be identified")
+        return {"omega_m", "theta_m", "theta_f", "temperature", "Q_red"}, st, target == "Q_red"
+    moving = aw > 0.02 * scale
+    pos, neg = np.mean(w[moving] > 0), np.mean(w[moving] < 0)
+    if min(pos, neg) < 0.02:
+        st.append("omega_m: motion in one direction only; Coulomb friction (sgn omega) is indistinguishable from "
+                  "a constant offset and direction-dependent terms cannot be separated from direction-independent ones")
+        ex |= {"bias", "position_periodic_friction"}
+    am = aw[moving]
+    if len(am) and np.std(am) / max(np.mean(am), 1e-12) < 0.05:
+        st.append("omega_m: constant speed only; viscous, Stribeck, drag and other speed-dependent terms "
+                  "are not identifiable (every speed function is a constant here)")
+        ex |= {"stribeck_friction", "drag", "temperature"}
+    elif np.mean(am < 0.15 * scale) < 0.01:
+        st.append("omega_m: no low-speed data (|omega_m| < 15 % of its 90th percentile in < 1 % of samples); "
+                  "Stribeck friction is not identifiable")
+        ex.add("stribeck_friction")
+    for var in ("theta_m", "theta_f"):
+        if var in avail:
+            revs = float(np.ptp(sig[var]) / (2 * np.pi))
+            if revs < 2.0:
+                st.append(f"{var}: covers {revs:.2f} revolutions (< 2); its position-periodic effects are not identifiable")
+                ex.add(var)
+    if "temperature" not in avail:
+        st.append("temperature: not measured; temperature-dependent friction is not identifiable")
+        ex.add("temperature")
+    elif np.ptp(sig["temperature"]) < 3.0:
+        st.append(f"temperature: varies by only {np.ptp(sig['temperature']):.1f} K (< 3 K); "
+                  "temperature-dependent friction is not identifiable")
+        ex.add("temperature")
+    if "Q_red" not in avail:
+        st.append("Q_red: not measured; load-dependent friction is not identifiable")
+        ex.add("load")
+    elif np.quantile(np.abs(sig["Q_red"]), 0.9) < 1e-6:
+        st.append("Q_red: no load; load-dependent friction is not identifiable")
+        ex.add("load")
+    if target == "Q_red":
+        if "phi" not in avail or np.std(sig["phi"]) < 1e-7:
+            st.append("phi: no measurable twist (theta_f - theta_m/N); the Q_red (stiffness) model is not identifiable")
+            return ex, st, False
+    return ex, st, True
+
+
+def _prune_collinear(X: np.ndarray, names: list[str], tol: float = 1e-8) -> tuple[list[int], list[str]]:
+    """Indices of columns to keep (greedy, in order) and statements on the dropped ones."""
+    keep: list[int] = []
+    st = []
+    for j in range(X.shape[1]):
+        x = X[:, j]
+        nx = np.linalg.norm(x)
+        if nx < 1e-12:
+            st.append(f"baseline parameter {names[j]}: its regressor is zero on these data; not identifiable (kept at 0)")
+            continue
+        if keep:
+            A = X[:, keep]
+            beta, *_ = np.linalg.lstsq(A, x, rcond=None)
+            if np.linalg.norm(x - A @ beta) < np.sqrt(tol) * nx * 10:
+                st.append(f"baseline parameter {names[j]}: collinear with {[names[k] for k in keep]} on these data; "
+                          "not identifiable (kept at 0)")
+                continue
+        keep.append(j)
+    return keep, st
+
+
+# ---------------------------------------------------------------------------
+# cross-validated group selection
+# ---------------------------------------------------------------------------
+
+
+class _BlockGram:
+    """Per-block Gram matrices for fast leave-one-block-out least squares."""
+
+    def __init__(self, X: np.ndarray, y: np.ndarray, block: np.ndarray):
+        self.scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
+        Xs = X / self.scale
+        self.blocks = np.unique(block)
+        self.G = np.stack([Xs[block == b].T @ Xs[block == b] for b in self.blocks])
+        self.g = np.stack([Xs[block == b].T @ y[block == b] for b in self.blocks])
+        self.yy = np.array([y[block == b] @ y[block == b] for b in self.blocks])
+        self.Gt, self.gt = self.G.sum(0), self.g.sum(0)
+
+    def cv_sse(self, idx: list[int]) -> np.ndarray:
+        """Held-out SSE per block when each block is predicted from the others."""
+        ix = np.asarray(idx)
+        G = self.Gt[np.ix_(ix, ix)][None] - self.G[:, ix][:, :, ix]
+        g = self.gt[ix][None] - self.g[:, ix]
+        lam = 1e-9 * np.trace(self.Gt[np.ix_(ix, ix)]) / len(ix)
+        beta = np.linalg.solve(G + lam * np.eye(len(ix))[None], g[..., None])[..., 0]
+        Gb = self.G[:, ix][:, :, ix]
+        gb = self.g[:, ix]
+        return self.yy - 2 * np.einsum("bi,bi->b", beta, gb) + np.einsum("bi,bij,bj->b", beta, Gb, beta)
+
+
+def _lstsq(X, y):
+    scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
+    beta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
+    return beta / scale
+
+
+def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Candidate, list[int]]], opt: Options):
+    """Forward group selection + backward pruning by leave-one-block-out CV. Returns (selected, trace)."""
+    cur_idx = list(base_idx)
+    cur = gram.cv_sse(cur_idx)
+    selected: list[int] = []  # indices into groups
+    trace = [{"step": "baseline", "cv_sse": float(cur.sum())}]
+    fams_used: set[str] = set()
+    while len(selected) < opt.max_effects:
+        best = None
+        for gi, (cand, cols) in enumerate(groups):
+            if cand.family in fams_used:
+                continue
+            e = gram.cv_sse(cur_idx + cols)
+            if best is None or e.sum() < best[1].sum():
+                best = (gi, e)
+        if best is None:
+            break
+        gi, e = best
+        gain = (cur.sum() - e.sum()) / cur.sum()
+        folds = float(np.mean(e < cur))
+        cand = groups[gi][0]
+        rec = {"step": "add?", "candidate": f"{cand.name}[{cand.family}]", "gain": float(gain), "folds_better": folds}
+        if gain < opt.min_gain or folds < opt.fold_majority:
+            rec["step"] = "stop"
+            trace.append(rec)
+            break
+        rec["step"] = "add"
+        trace.append(rec)
+        selected.append(gi)
+        fams_used.add(cand.family)
+        cur_idx = cur_idx + groups[gi][1]
+        cur = e
+    # backward: drop groups that no longer earn their place
+    changed = True
+    while changed and selected:
+        changed = False
+        for gi in list(selected):
+            idx = list(base_idx) + [c for gj in selected if gj != gi for c in groups[gj][1]]
+            e = gram.cv_sse(idx)
+            if (e.sum() - cur.sum()) / cur.sum() < opt.min_gain / 2:
+                selected.remove(gi)
+                trace.append({"step": "drop", "candidate": f"{groups[gi][0].name}[{groups[gi][0].family}]",
+                              "loss": float((e.sum() - cur.sum()) / cur.sum())})
+                cur = e
+                changed = True
+                break
+    return selected, trace
+
+
+# ---------------------------------------------------------------------------
+# per-bag angle offset
+# ---------------------------------------------------------------------------
+
+
+def estimate_offset(terms: list[dict], sig: dict, y_rest: np.ndarray, var: str = "theta_m") -> float:
+    """Offset delta (rad) of ``var`` minimising ||y_rest - terms(var + delta)||^2 (1 deg grid + refinement)."""
+    def sse(d):
+        s = dict(sig)
+        s[var] = sig[var] + d
+        return float(np.sum((y_rest - evaluate_terms(terms, s)) ** 2))
+
+    grid = np.deg2rad(np.arange(0.0, 360.0, 1.0))
+    e = np.array([sse(d) for d in grid])
+    d0 = grid[int(np.argmin(e))]
+    fine = d0 + np.deg2rad(np.linspace(-1, 1, 41))
+    e2 = np.array([sse(d) for d in fine])
+    return float(np.mod(fine[int(np.argmin(e2))], 2 * np.pi))
+
+
+# ---------------------------------------------------------------------------
+# the pipeline for one target signal
+# ---------------------------------------------------------------------------
+
+
+def _err(r: np.ndarray, y: np.ndarray) -> dict:
+    rmse = float(np.sqrt(np.mean(r**2))) if len(r) else float("nan")
+    sd = float(np.std(y)) if len(y) else float("nan")
+    return {"rmse": rmse, "nrmse": rmse / sd if sd > 0 else float("nan"), "n": int(len(r))}
+
+
+def split_fit_heldout(ds: Dataset, heldout_bags: list[int] | None, heldout_frac: float) -> np.ndarray:
+    """Boolean mask of held-out rows: whole bags if given, else the last ``heldout_frac`` time blocks of each bag."""
+    if heldout_bags:
+        return np.isin(ds.bag, heldout_bags)
+    nb = len(np.unique(ds.block)) // max(len(ds.bag_names), 1)
+    k = max(1, int(round(heldout_frac * nb)))
+    ho = np.zeros(ds.n, bool)
+    for b in range(len(ds.bag_names)):
+        blocks = np.unique(ds.block[ds.bag == b])
+        ho |= np.isin(ds.block, blocks[-k:])
+    return ho
+
+
+def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: list[str] | None = None,
+                    extra_terms: list[dict] | None = None, twin_params: dict | None = None,
+                    opt: Options | None = None) -> SignalResult:
+    """Run discovery for one target signal; see the module docstring."""
+    opt = opt or Options()
+    declared = list(DEFAULT_DECLARED.get(target, []) if declared is None else declared)
+    extra_terms = list(extra_terms or [])
+    twin_params = dict(twin_params or {})
+    sig = ds.signals
+    avail = {k for k, v in sig.items() if np.std(v) > 0}
+    if target not in sig:
+        raise DiscoveryError(f"target signal {target} is not measured in {ds.bag_names}")
+    fit = ~heldout
+    statements: list[str] = []
+    empty = dict(signal=target, declared_before=declared, declared_after=list(declared), baseline_params={},
+                 refit_baseline_params={}, effects=[], terms=[], error_before={}, error_after={})
+    n_fit_blocks = len(np.unique(ds.block[fit]))
+    if fit.sum() < opt.min_samples or n_fit_blocks < opt.min_fit_blocks or heldout.sum() < opt.min_samples // 4:
+        statements.append(
+            f"too little data: {int(fit.sum())} fit samples in {n_fit_blocks} blocks and {int(heldout.sum())} held-out "
+            f"samples (need >= {opt.min_samples} fit samples in >= {opt.min_fit_blocks} blocks and "
+            f">= {opt.min_samples // 4} held out); nothing can be identified reliably")
+        return SignalResult(identifiable=False, statements=statements, **empty)
+
+    sf = {k: v[fit] for k, v in sig.items()}
+    scale = float(np.quantile(np.abs(sf["omega_m"]), 0.9))
+    sgn_eps = max(1e-3 * scale, 1e-5)  # near-hard sign: smoothing only below 0.1 % of the speed scale
+    excluded, st, ok = identifiability(sf, target, avail)
+    statements += st
+    if not ok:
+        return SignalResult(identifiable=False, statements=statements, **empty)
+
+    # 1. baseline: columns, collinearity, fit
+    cols, notes = baseline_columns(target, avail, declared, extra_terms, sgn_eps, twin_params)
+    statements += notes
+    y = sig[target]
+    Xb_all = _baseline_matrix(cols, sig)
+    keep, st = _prune_collinear(Xb_all[fit], [c.param for c in cols])
+    statements += st
+    cols = [cols[j] for j in keep]
+    Xb_all = Xb_all[:, keep]
+    beta_b = _lstsq(Xb_all[fit], y[fit])
+    r_base = y - Xb_all @ beta_b
+    base_params = {c.param: float(b) for c, b in zip(cols, beta_b)}
+
+    # 2. residual structure: order spectra on the fit data
+    spectra: list[OrderSpectrum] = []
+    orders: dict[str, list[float]] = {}
+    for var in ("theta_m", "theta_f"):
+        if var not in avail or var in excluded:
+            continue
+        found: list[float] = []
+        mods = [(None, "")]
+        if "omega_m" in avail:
+            mods.append((np.sign(sf["omega_m"]), "sgn(omega_m)"))
+        for mod, mname in mods:
+            spec = analyse_orders(r_base[fit], sf[var], var, modulator=mod, modulator_name=mname,
+                                  segment=ds.segment[fit], ratio=opt.peak_ratio, max_peaks=opt.max_peaks)
+            spectra.append(spec)
+            found += spec.peaks
+        if spectra and spectra[-1].revolutions >= 2:
+            orders[var] = merge_orders(catalog_orders(var), found)
+
+    # 3. candidates
+    moving = np.abs(sf["omega_m"]) > 0.02 * scale
+    ctx = LibraryContext(
+        target=target, available=avail, omega_scale=scale,
+        omega_low=float(np.quantile(np.abs(sf["omega_m"][moving]), 0.1)) if moving.any() else scale,
+        sgn_eps=sgn_eps, t_ref=float(np.median(sf["temperature"])) if "temperature" in sf else 25.0,
+        orders=orders, declared=set(declared), excluded=excluded,
+    )
+    cands = build_candidates(ctx)
+    groups: list[tuple[Candidate, list[int]]] = []
+    Xc_cols = []
+    j0 = Xb_all.shape[1]
+    for c in cands:
+        M = basis_matrix(c.basis, sig)
+        if not np.all(np.isfinite(M)) or np.any(np.std(M[fit], 0) < 1e-12 * (1 + np.abs(M[fit]).max())) and \
+                not any(b["op"] == "const" for b in c.basis):
+            continue
+        idx = list(range(j0, j0 + M.shape[1]))
+        j0 += M.shape[1]
+        Xc_cols.append(M)
+        groups.append((c, idx))
+    X_all = np.concatenate([Xb_all] + Xc_cols, 1) if Xc_cols else Xb_all
+    gram = _BlockGram(X_all[fit], y[fit], ds.block[fit])
+    base_idx = list(range(Xb_all.shape[1]))
+    sel, trace = select_groups(gram, base_idx, groups, opt)
+
+    # 4. refit on all fit data
+    idx = base_idx + [c for gi in sel for c in groups[gi][1]]
+    beta = _lstsq(X_all[fit][:, idx], y[fit])
+    refit_params = {c.param: float(b) for c, b in zip(cols, beta[: len(cols)])}
+    terms, pos = [], len(cols)
+    for gi in sel:
+        cand, cix = groups[gi]
+        terms.append(cand.term(target, beta[pos : pos + len(cix)]))
+        pos += len(cix)
+
+    # 5. held-out scoring (optional per-bag offset of theta_m estimated on a calibration part)
+    score = heldout.copy()
+    offsets: dict = {}
+    base_pred = Xb_all @ beta[: len(cols)]
+    y_after_pred = base_pred + (evaluate_terms(terms, sig) if terms else 0.0)
+    periodic_m = [t for t in terms if t.get("variable") == "theta_m" and t.get("order") is not None]
+    if opt.angle_offset == "estimate":
+        for b in np.unique(ds.bag[heldout]):
+            rows = np.flatnonzero(heldout & (ds.bag == b))
+            calib = rows[ds.tfrac[rows] < ds.tfrac[rows].min() + opt.calib_frac * np.ptp(ds.tfrac[rows])]
+            score[calib] = False
+            if not periodic_m:
+                continue
+            others = [t for t in terms if t not in periodic_m]
+            s_c = {k: v[calib] for k, v in sig.items()}
+            y_rest = y[calib] - base_pred[calib] - (evaluate_terms(others, s_c) if others else 0.0)
+            d = estimate_offset(periodic_m, s_c, y_rest)
+            offsets[ds.bag_names[b]] = d
+            s_b = {k: v[rows] for k, v in sig.items()}
+            s_b["theta_m"] = s_b["theta_m"] + d
+            y_after_pred[rows] = base_pred[rows] + evaluate_terms(terms, s_b)
+    r_before = y - Xb_all @ beta_b
+    r_after = y - y_after_pred
+    eb = _err(r_before[score], y[score])
+    ea = _err(r_after[score], y[score]) if terms else dict(eb)
+
+    # explained fraction per effect (drop it, keep the other coefficients), then order best first
+    sse_b = float(np.sum(r_before[score] ** 2))
+    effects = []
+    for t in terms:
+        contrib = np.zeros(ds.n)
+        rows = np.flatnonzero(score)
+        s_sc = {k: v[rows] for k, v in sig.items()}
+        if t in periodic_m and offsets:
+            s_sc = dict(s_sc)
+            s_sc["theta_m"] = s_sc["theta_m"] + np.array([offsets.get(ds.bag_names[b], 0.0) for b in ds.bag[rows]])
+        contrib[rows] = evaluate_terms([t], s_sc)
+        sse_without = float(np.sum((r_after[score] + contrib[score]) ** 2))
+        sse_with = float(np.sum(r_after[score] ** 2))
+        effects.append({"name": t["name"], "variable": t["variable"], "order": t["order"], "form": t["form"],
+                        "parameters": t["parameters"], "explained": (sse_without - sse_with) / sse_b if sse_b > 0 else 0.0,
+                        "signal": target})
+    order = np.argsort([-e["explained"] for e in effects]) if effects else []
+    effects = [effects[i] for i in order]
+    terms = [terms[i] for i in order]
+    declared_after = list(declared)
+    for e in effects:
+        if e["name"] != "unknown" and e["name"] not in declared_after:
+            declared_after.append(e["name"])
+    if not terms:
+        statements.append("no candidate effect lowers the cross-validated error by "
+                          f">= {opt.min_gain:.0%} in most blocks: the twin is left as it was")
+
+    # comparisons: plain least squares of the same terms / of the whole library, no offset handling
+    comp = {}
+    if terms:
+        comp["selected_terms_plain_lstsq_no_offset"] = _err((y - X_all[:, idx] @ beta)[score], y[score])
+    allidx = list(range(X_all.shape[1]))
+    beta_all = _lstsq(X_all[fit], y[fit])
+    comp["whole_library_plain_lstsq"] = _err((y - X_all @ beta_all)[score], y[score])
+    comp["n_library_columns"] = len(allidx)
+    comp["n_candidates"] = len(groups)
+
+    plot = {"t": ds.t[score], "bag": ds.bag[score], "r_before": r_before[score], "r_after": r_after[score],
+            "omega_m": sig["omega_m"][score], "theta_m": sig["theta_m"][score], "y": y[score]}
+    for t in terms[:4]:
+        v = t["variable"]
+        if v in sig:
+            plot[f"term:{t['name']}:{v}:{t['order']}"] = (sig[v][score], evaluate_terms([t], {k: a[score] for k, a in sig.items()}),
+                                                         r_before[score])
+    return SignalResult(
+        signal=target, identifiable=True, statements=statements, declared_before=declared,
+        declared_after=declared_after, baseline_params=base_params, refit_baseline_params=refit_params,
+        effects=effects, terms=terms, error_before=eb, error_after=ea, spectra=spectra, cv_trace=trace,
+        offsets=offsets, comparisons=comp, plot=plot,
+    )
+

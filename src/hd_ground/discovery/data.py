@@ -1,0 +1,159 @@
+"""Turn contract missions into the signal table discovery works on.
+
+Only measured contract signals are used (``/sim/...`` is never read here).
+Rows with a non-finite value in any signal that is in use are dropped and the
+count is reported. Each bag is cut into contiguous time blocks: fit/held-out
+splits and cross-validation folds are made of whole blocks or bags, never of
+interleaved samples (neighbouring samples are correlated; a sample split would
+overstate how well a term generalises).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hd_bag.mission import Mission
+
+
+class DiscoveryError(ValueError):
+    """Input discovery cannot work with; the message names the file and the problem."""
+
+
+@dataclass
+class Dataset:
+    signals: dict[str, np.ndarray]  # name -> (n,) float64, finite, SI units
+    bag: np.ndarray  # (n,) bag index
+    block: np.ndarray  # (n,) global time-block index (blocks never span bags)
+    tfrac: np.ndarray  # (n,) time fraction within its bag, 0..1
+    t: np.ndarray  # (n,) s within its bag
+    segment: np.ndarray  # (n,) global segment index (no differentiation across it)
+    bag_names: list[str]
+    gear_ratio: float
+    torque_constant: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return len(self.bag)
+
+    def subset(self, mask: np.ndarray) -> "Dataset":
+        return Dataset({k: v[mask] for k, v in self.signals.items()}, self.bag[mask], self.block[mask],
+                       self.tfrac[mask], self.t[mask], self.segment[mask], self.bag_names, self.gear_ratio,
+                       self.torque_constant, list(self.notes))
+
+
+def _derivative(x: np.ndarray, t: np.ndarray, seg: np.ndarray, window_s: float) -> np.ndarray:
+    """Smoothed time derivative per segment (Savitzky-Golay, quadratic), unit of x per second."""
+    from scipy.signal import savgol_filter
+
+    out = np.full(len(x), np.nan)
+    for s in np.unique(seg):
+        idx = np.flatnonzero(seg == s)
+        if len(idx) < 3:
+            continue
+        xs, ts = x[idx], t[idx]
+        dt = float(np.median(np.diff(ts)))
+        w = int(round(window_s / dt)) | 1
+        if w >= 5 and len(idx) > w and np.all(np.isfinite(xs)):
+            out[idx] = savgol_filter(xs, w, 2, deriv=1, delta=dt)
+        else:
+            out[idx] = np.gradient(xs, ts)
+    return out
+
+
+def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02) -> tuple[dict[str, np.ndarray], list[str]]:
+    """Signal table of one mission (full length, may contain NaN) and notes on what was done."""
+    notes: list[str] = []
+    name = m.report.path or m.meta.actuator_id
+    n = m.n
+    if n < 10:
+        raise DiscoveryError(f"{name}: only {n} joint-state samples; discovery needs at least a few seconds of data")
+    N = float(m.meta.gear_ratio)
+    kt = float(m.meta.torque_constant)
+    if not (np.isfinite(N) and N > 0 and np.isfinite(kt) and kt > 0):
+        raise DiscoveryError(f"{name}: gear_ratio={N} and torque_constant={kt} must be finite and positive")
+    seg = np.asarray(m.segment if m.segment is not None else np.zeros(n, int))
+    s: dict[str, np.ndarray] = {}
+    for k in ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red"):
+        v = np.asarray(getattr(m, k), float)
+        if v.shape != (n,):
+            raise DiscoveryError(f"{name}: signal {k} has shape {v.shape}, expected ({n},)")
+        s[k] = v
+    if np.mean(np.isfinite(s["omega_m"])) < 0.5 and np.mean(np.isfinite(s["theta_m"])) > 0.9:
+        s["omega_m"] = _derivative(s["theta_m"], m.t, seg, deriv_window_s)
+        notes.append(f"{name}: omega_m mostly missing; derived from theta_m")
+    s["i_q"] = s["tau_m"] / kt
+    s["alpha_m"] = _derivative(s["omega_m"], m.t, seg, deriv_window_s)
+    if np.any(np.isfinite(s["Q_red"])):
+        s["Q_red_over_N"] = s["Q_red"] / N
+    s["phi"] = s["theta_f"] - s["theta_m"] / N
+    s["phi_dot"] = s["omega_f"] - s["omega_m"] / N
+    temp = m.temperature_on_t("gearbox")
+    if np.any(np.isfinite(temp)):
+        s["temperature"] = temp
+    tw = m.temperature_on_t("motor_winding")
+    if np.any(np.isfinite(tw)) and "motor_winding" in m.temperatures:
+        s["temperature_winding"] = tw
+    return s, notes
+
+
+def dataset_from_missions(missions: list[Mission], names: list[str] | None = None, *, blocks_per_bag: int = 5,
+                          required: tuple[str, ...] = ("theta_m", "omega_m", "tau_m")) -> Dataset:
+    """Concatenate missions into one :class:`Dataset`.
+
+    A signal that is entirely missing in any bag is dropped from all bags (the
+    same model must apply everywhere); ``required`` signals must be present.
+    """
+    if not missions:
+        raise DiscoveryError("no missions given")
+    names = names or [m.report.path or f"bag{i}" for i, m in enumerate(missions)]
+    tables, notes = [], []
+    gear, kt = None, None
+    for m, nm in zip(missions, names):
+        s, nn = signals_of_mission(m)
+        tables.append(s)
+        notes += nn
+        if gear is None:
+            gear, kt = float(m.meta.gear_ratio), float(m.meta.torque_constant)
+        elif abs(float(m.meta.gear_ratio) - gear) > 1e-9 * gear:
+            raise DiscoveryError(f"{nm}: gear_ratio {m.meta.gear_ratio} differs from the first bag's {gear}; "
+                                 "discover one actuator type at a time")
+    keys = set(tables[0])
+    for s, nm in zip(tables, names):
+        for k in list(keys):
+            if k not in s or not np.any(np.isfinite(s[k])):
+                if k in required:
+                    raise DiscoveryError(f"{nm}: required signal {k} has no finite sample")
+                notes.append(f"{nm}: {k} not measured; not used")
+                keys.discard(k)
+    keys = sorted(keys)
+    cols = {k: [] for k in keys}
+    bag, block, tfrac, tt, segm = [], [], [], [], []
+    nblk = 0
+    segoff = 0
+    for i, (m, s, nm) in enumerate(zip(missions, tables, names)):
+        ok = np.ones(m.n, bool)
+        for k in keys:
+            ok &= np.isfinite(s[k])
+        if (~ok).sum():
+            notes.append(f"{nm}: dropped {(~ok).sum()} of {m.n} samples with a non-finite signal")
+        if ok.sum() < 10:
+            raise DiscoveryError(f"{nm}: fewer than 10 samples with all signals finite")
+        t = m.t - m.t[0]
+        frac = t / max(t[-1], 1e-12)
+        b = np.minimum((frac * blocks_per_bag).astype(int), blocks_per_bag - 1)
+        for k in keys:
+            cols[k].append(s[k][ok])
+        bag.append(np.full(ok.sum(), i))
+        block.append(b[ok] + nblk)
+        tfrac.append(frac[ok])
+        tt.append(t[ok])
+        sg = np.asarray(m.segment)[ok].astype(int)
+        segm.append(sg + segoff)
+        segoff += int(sg.max()) + 1 if len(sg) else 1
+        nblk += blocks_per_bag
+    return Dataset({k: np.concatenate(v) for k, v in cols.items()}, np.concatenate(bag), np.concatenate(block),
+                   np.concatenate(tfrac), np.concatenate(tt), np.concatenate(segm), list(names), float(gear),
+                   float(kt), notes)
