@@ -1,0 +1,593 @@
+"""Minimal, fast MCAP record layer (spec: https://mcap.dev/spec), numpy based.
+
+Why our own and not ``mcap.writer``/``mcap.reader``: the contract topics carry
+fixed-layout messages at 1 to 20 kHz, and the per-message Python cost of the
+generic libraries (record objects, one call per message) dominates reading and
+writing. Here whole blocks of same-length Message records are built and cut
+with numpy, and the reader streams one chunk at a time, so memory is bounded by
+the chunk size, not the file size. Everything written here is read back by
+``mcap``, ``mcap-ros2-support`` and ``rosbags`` (tested).
+
+The reader is tolerant by design: a file that ends early (a recorder killed
+mid-run) yields every complete chunk before the cut and reports the truncation
+through :class:`ScanIssue` objects instead of raising; corrupt bytes (bad CRC,
+undecodable chunk, impossible record length) raise :class:`McapFormatError`.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import struct
+import zlib
+from dataclasses import dataclass, field
+from typing import BinaryIO, Iterator
+
+import numpy as np
+
+MAGIC = b"\x89MCAP0\r\n"
+
+OP_HEADER = 0x01
+OP_FOOTER = 0x02
+OP_SCHEMA = 0x03
+OP_CHANNEL = 0x04
+OP_MESSAGE = 0x05
+OP_CHUNK = 0x06
+OP_MESSAGE_INDEX = 0x07
+OP_CHUNK_INDEX = 0x08
+OP_ATTACHMENT = 0x09
+OP_ATTACHMENT_INDEX = 0x0A
+OP_STATISTICS = 0x0B
+OP_METADATA = 0x0C
+OP_METADATA_INDEX = 0x0D
+OP_SUMMARY_OFFSET = 0x0E
+OP_DATA_END = 0x0F
+
+#: Message record fixed part: channel_id u16, sequence u32, log_time u64, publish_time u64.
+MSG_FIXED = 2 + 4 + 8 + 8
+#: Upper bound on a single record we accept (1 GiB): larger means corrupt length bytes.
+MAX_RECORD = 1 << 30
+
+
+class McapFormatError(ValueError):
+    """The bytes are not a valid MCAP stream (message names what and where)."""
+
+
+# ---------------------------------------------------------------------------
+# primitive encoders
+# ---------------------------------------------------------------------------
+def _s(x: str) -> bytes:
+    b = x.encode("utf-8")
+    return struct.pack("<I", len(b)) + b
+
+
+def _map_ss(d: dict[str, str]) -> bytes:
+    body = b"".join(_s(k) + _s(v) for k, v in d.items())
+    return struct.pack("<I", len(body)) + body
+
+
+def _record(op: int, content: bytes) -> bytes:
+    return struct.pack("<BQ", op, len(content)) + content
+
+
+def header_record(profile: str, library: str) -> bytes:
+    return _record(OP_HEADER, _s(profile) + _s(library))
+
+
+def schema_record(sid: int, name: str, encoding: str, data: bytes) -> bytes:
+    return _record(OP_SCHEMA, struct.pack("<H", sid) + _s(name) + _s(encoding) + struct.pack("<I", len(data)) + data)
+
+
+def channel_record(cid: int, sid: int, topic: str, msg_enc: str, metadata: dict[str, str]) -> bytes:
+    return _record(OP_CHANNEL, struct.pack("<HH", cid, sid) + _s(topic) + _s(msg_enc) + _map_ss(metadata))
+
+
+def metadata_record(name: str, metadata: dict[str, str]) -> bytes:
+    return _record(OP_METADATA, _s(name) + _map_ss(metadata))
+
+
+def message_records(channel_id: int, seq: np.ndarray, log_time: np.ndarray, publish_time: np.ndarray,
+                    payload: np.ndarray) -> np.ndarray:
+    """Message records for ``n`` same-length payloads, as an (n, 9 + 22 + L) uint8 array.
+
+    ``payload`` is an (n, L) uint8 array of serialised messages.
+    """
+    n, L = payload.shape
+    rec = np.empty((n, 9 + MSG_FIXED + L), dtype=np.uint8)
+    rec[:, 0] = OP_MESSAGE
+    rec[:, 1:9] = np.frombuffer(struct.pack("<Q", MSG_FIXED + L), np.uint8)
+    rec[:, 9:11] = np.frombuffer(struct.pack("<H", channel_id), np.uint8)
+    rec[:, 11:15] = np.ascontiguousarray(seq, dtype="<u4").view(np.uint8).reshape(n, 4)
+    rec[:, 15:23] = np.ascontiguousarray(log_time, dtype="<u8").view(np.uint8).reshape(n, 8)
+    rec[:, 23:31] = np.ascontiguousarray(publish_time, dtype="<u8").view(np.uint8).reshape(n, 8)
+    rec[:, 31:] = payload
+    return rec
+
+
+def _compress(data: bytes, compression: str) -> bytes:
+    if compression == "":
+        return data
+    if compression == "zstd":
+        return _zstd_compressor().compress(data)
+    if compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.compress(data)
+    raise ValueError(f"unsupported chunk compression {compression!r} (zstd, lz4 or none)")
+
+
+_ZC = None
+_ZD = None
+
+
+def _zstd_compressor():
+    global _ZC
+    if _ZC is None:
+        import zstandard
+
+        _ZC = zstandard.ZstdCompressor(level=3)
+    return _ZC
+
+
+def _decompress(data: bytes, compression: str, size: int) -> bytes:
+    global _ZD
+    if compression == "":
+        return data
+    if compression == "zstd":
+        if _ZD is None:
+            import zstandard
+
+            _ZD = zstandard.ZstdDecompressor()
+        return _ZD.decompress(data, max_output_size=size)
+    if compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.decompress(data)
+    raise McapFormatError(f"unsupported chunk compression {compression!r}")
+
+
+# ---------------------------------------------------------------------------
+# writer
+# ---------------------------------------------------------------------------
+@dataclass
+class _ChunkInfo:
+    start: int
+    end: int
+    offset: int
+    length: int
+    mi_offsets: dict[int, int]
+    mi_length: int
+    compressed_size: int
+    uncompressed_size: int
+
+
+class McapFileWriter:
+    """Append-only MCAP writer: schemas/channels/metadata up front, then chunks.
+
+    Each :meth:`write_chunk` writes one complete Chunk record and its Message
+    Index records, then flushes the file, so a process killed at any moment
+    leaves every earlier chunk readable. :meth:`close` adds the summary section
+    (schemas, channels, statistics, chunk and metadata indexes) and the footer.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, profile: str = "ros2", library: str = "hdphm hd_bag",
+                 compression: str = "zstd", fsync: bool = False):
+        if compression in (None, "none"):
+            compression = ""
+        if compression not in ("", "zstd", "lz4"):
+            raise ValueError(f"unsupported chunk compression {compression!r} (zstd, lz4 or none)")
+        self.path = os.fspath(path)
+        self.compression = compression
+        self.fsync = fsync
+        self._f: BinaryIO = open(self.path, "wb")
+        self._pos = 0
+        self._schemas: list[bytes] = []
+        self._channels: list[bytes] = []
+        self._meta_index: list[bytes] = []
+        self._chunks: list[_ChunkInfo] = []
+        self._counts: dict[int, int] = {}
+        self._t0: int | None = None
+        self._t1: int | None = None
+        self._closed = False
+        self._write(MAGIC + header_record(profile, library))
+
+    def _write(self, b: bytes) -> None:
+        self._f.write(b)
+        self._pos += len(b)
+
+    def add_schema(self, sid: int, name: str, encoding: str, data: bytes) -> None:
+        rec = schema_record(sid, name, encoding, data)
+        self._schemas.append(rec)
+        self._write(rec)
+
+    def add_channel(self, cid: int, sid: int, topic: str, msg_enc: str, metadata: dict[str, str]) -> None:
+        rec = channel_record(cid, sid, topic, msg_enc, metadata)
+        self._channels.append(rec)
+        self._write(rec)
+
+    def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
+        rec = metadata_record(name, metadata)
+        off = self._pos
+        self._write(rec)
+        self._meta_index.append(_record(OP_METADATA_INDEX, struct.pack("<QQ", off, len(rec)) + _s(name)))
+        self.flush()
+
+    def write_chunk(self, blocks: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
+        """Write one chunk from ``(channel_id, log_time[n], records[n, W])`` blocks.
+
+        ``records`` are complete Message records (see :func:`message_records`),
+        any width per block. Blocks are stored in the given order.
+        """
+        blocks = [b for b in blocks if len(b[1])]
+        if not blocks:
+            return
+        parts = []
+        mi: dict[int, list[np.ndarray]] = {}
+        off = 0
+        t0 = min(int(b[1].min()) for b in blocks)
+        t1 = max(int(b[1].max()) for b in blocks)
+        for cid, lt, rec in blocks:
+            n, w = rec.shape
+            offs = off + w * np.arange(n, dtype=np.uint64)
+            mi.setdefault(cid, []).append(np.stack([np.asarray(lt, np.uint64), offs], axis=1))
+            parts.append(rec.tobytes())
+            off += n * w
+            self._counts[cid] = self._counts.get(cid, 0) + n
+        raw = b"".join(parts)
+        crc = zlib.crc32(raw)
+        comp = _compress(raw, self.compression)
+        content = (struct.pack("<QQQI", t0, t1, len(raw), crc) + _s(self.compression)
+                   + struct.pack("<Q", len(comp)) + comp)
+        chunk = _record(OP_CHUNK, content)
+        chunk_off = self._pos
+        self._write(chunk)
+        mi_start = self._pos
+        mi_offsets = {}
+        for cid, arrs in mi.items():
+            a = np.concatenate(arrs)
+            a = a[np.argsort(a[:, 0], kind="stable")]
+            body = a.astype("<u8").tobytes()
+            mi_offsets[cid] = self._pos
+            self._write(_record(OP_MESSAGE_INDEX, struct.pack("<HI", cid, len(body)) + body))
+        self._chunks.append(_ChunkInfo(t0, t1, chunk_off, len(chunk), mi_offsets, self._pos - mi_start,
+                                       len(comp), len(raw)))
+        self._t0 = t0 if self._t0 is None else min(self._t0, t0)
+        self._t1 = t1 if self._t1 is None else max(self._t1, t1)
+        self.flush()
+
+    def flush(self) -> None:
+        self._f.flush()
+        if self.fsync:
+            os.fsync(self._f.fileno())
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._write(_record(OP_DATA_END, struct.pack("<I", 0)))
+        summary_start = self._pos
+        groups: list[tuple[int, int, int]] = []
+
+        def group(op: int, recs: list[bytes]) -> None:
+            if recs:
+                start = self._pos
+                for r in recs:
+                    self._write(r)
+                groups.append((op, start, self._pos - start))
+
+        group(OP_SCHEMA, self._schemas)
+        group(OP_CHANNEL, self._channels)
+        cm = b"".join(struct.pack("<HQ", c, n) for c, n in sorted(self._counts.items()))
+        stats = (struct.pack("<QHIIII", sum(self._counts.values()), len(self._schemas), len(self._channels), 0,
+                             len(self._meta_index), len(self._chunks))
+                 + struct.pack("<QQ", self._t0 or 0, self._t1 or 0) + struct.pack("<I", len(cm)) + cm)
+        group(OP_STATISTICS, [_record(OP_STATISTICS, stats)])
+        cis = []
+        for c in self._chunks:
+            mio = b"".join(struct.pack("<HQ", k, v) for k, v in c.mi_offsets.items())
+            cis.append(_record(OP_CHUNK_INDEX, struct.pack("<QQQQ", c.start, c.end, c.offset, c.length)
+                               + struct.pack("<I", len(mio)) + mio + struct.pack("<Q", c.mi_length)
+                               + _s(self.compression) + struct.pack("<QQ", c.compressed_size, c.uncompressed_size)))
+        group(OP_CHUNK_INDEX, cis)
+        group(OP_METADATA_INDEX, self._meta_index)
+        so_start = self._pos
+        for op, start, length in groups:
+            self._write(_record(OP_SUMMARY_OFFSET, struct.pack("<BQQ", op, start, length)))
+        # Footer: summary_crc 0 = not computed (allowed by the spec).
+        self._write(_record(OP_FOOTER, struct.pack("<QQI", summary_start, so_start, 0)) + MAGIC)
+        self._f.flush()
+        self._f.close()
+
+    def abort(self) -> None:
+        """Close the file without a summary (as if the process had died)."""
+        if not self._closed:
+            self._closed = True
+            self._f.close()
+
+
+# ---------------------------------------------------------------------------
+# reader
+# ---------------------------------------------------------------------------
+@dataclass
+class SchemaRec:
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+
+@dataclass
+class ChannelRec:
+    id: int
+    schema_id: int
+    topic: str
+    message_encoding: str
+    metadata: dict[str, str]
+
+
+@dataclass
+class MessageBlock:
+    """The messages of one chunk (or loose messages), as numpy arrays.
+
+    ``buf`` is the chunk's decompressed record bytes; message ``i`` has its
+    payload at ``buf[start[i] : start[i] + length[i]]``.
+    """
+
+    buf: np.ndarray  # uint8
+    channel: np.ndarray  # uint16
+    log_time: np.ndarray  # uint64
+    start: np.ndarray  # int64
+    length: np.ndarray  # int64
+
+
+@dataclass
+class ScanIssue:
+    """A problem met while scanning the file (position in bytes)."""
+
+    offset: int
+    problem: str
+    fatal: bool
+
+
+@dataclass
+class McapScan:
+    schemas: dict[int, SchemaRec] = field(default_factory=dict)
+    channels: dict[int, ChannelRec] = field(default_factory=dict)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    profile: str = ""
+    library: str = ""
+    issues: list[ScanIssue] = field(default_factory=list)
+    complete: bool = False  # footer + closing magic seen
+
+
+class _Cursor:
+    __slots__ = ("b", "p")
+
+    def __init__(self, b: bytes, p: int = 0):
+        self.b = b
+        self.p = p
+
+    def u16(self) -> int:
+        v = struct.unpack_from("<H", self.b, self.p)[0]
+        self.p += 2
+        return v
+
+    def u32(self) -> int:
+        v = struct.unpack_from("<I", self.b, self.p)[0]
+        self.p += 4
+        return v
+
+    def u64(self) -> int:
+        v = struct.unpack_from("<Q", self.b, self.p)[0]
+        self.p += 8
+        return v
+
+    def raw(self, n: int) -> bytes:
+        if self.p + n > len(self.b):
+            raise struct.error("field runs past the end of its record")
+        v = self.b[self.p:self.p + n]
+        self.p += n
+        return bytes(v)
+
+    def s(self) -> str:
+        return self.raw(self.u32()).decode("utf-8")
+
+    def map_ss(self) -> dict[str, str]:
+        end = self.u32() + self.p
+        out = {}
+        while self.p < end:
+            k = self.s()
+            out[k] = self.s()
+        return out
+
+
+def _parse_schema(c: bytes) -> SchemaRec:
+    cu = _Cursor(c)
+    sid = cu.u16()
+    name = cu.s()
+    enc = cu.s()
+    data = cu.raw(cu.u32())
+    return SchemaRec(sid, name, enc, data)
+
+
+def _parse_channel(c: bytes) -> ChannelRec:
+    cu = _Cursor(c)
+    cid = cu.u16()
+    sid = cu.u16()
+    topic = cu.s()
+    enc = cu.s()
+    md = cu.map_ss()
+    return ChannelRec(cid, sid, topic, enc, md)
+
+
+def _parse_metadata(c: bytes) -> tuple[str, dict[str, str]]:
+    cu = _Cursor(c)
+    name = cu.s()
+    return name, cu.map_ss()
+
+
+def _split_records(buf: bytes, where: str, scan: McapScan) -> MessageBlock:
+    """Walk the records of a chunk body; return its messages (schemas/channels go into ``scan``)."""
+    n = len(buf)
+    starts: list[int] = []
+    lens: list[int] = []
+    p = 0
+    unpack = struct.unpack_from
+    while p < n:
+        if p + 9 > n:
+            raise McapFormatError(f"{where}: record header cut at byte {p} of {n}")
+        op, ln = unpack("<BQ", buf, p)
+        q = p + 9
+        if q + ln > n:
+            raise McapFormatError(f"{where}: record (opcode 0x{op:02x}) of {ln} bytes overruns the chunk")
+        if op == OP_MESSAGE:
+            starts.append(q)
+            lens.append(ln)
+        elif op == OP_SCHEMA:
+            s = _parse_schema(buf[q:q + ln])
+            scan.schemas[s.id] = s
+        elif op == OP_CHANNEL:
+            c = _parse_channel(buf[q:q + ln])
+            scan.channels[c.id] = c
+        p = q + ln
+    arr = np.frombuffer(buf, np.uint8)
+    st = np.asarray(starts, np.int64)
+    ln = np.asarray(lens, np.int64)
+    if len(st) and ln.min() < MSG_FIXED:
+        raise McapFormatError(f"{where}: message record shorter than its fixed header")
+    idx = st[:, None] + np.arange(MSG_FIXED)[None, :]
+    fixed = arr[idx] if len(st) else np.zeros((0, MSG_FIXED), np.uint8)
+    fixed = np.ascontiguousarray(fixed)
+    ch = fixed[:, 0:2].copy().view("<u2").ravel()
+    lt = fixed[:, 6:14].copy().view("<u8").ravel()
+    return MessageBlock(arr, ch, lt, st + MSG_FIXED, ln - MSG_FIXED)
+
+
+def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_filter=None,
+              validate_crc: bool = True) -> Iterator[MessageBlock]:
+    """Stream an MCAP file chunk by chunk, yielding :class:`MessageBlock`.
+
+    Schema, channel and metadata records fill ``scan`` as they are met (before
+    the messages that use them, as the spec requires). ``chunk_filter`` is
+    reserved. Truncation is reported in ``scan.issues`` (non fatal, the
+    complete part is yielded); corruption raises :class:`McapFormatError`.
+    """
+    path = os.fspath(path)
+    scan = scan if scan is not None else McapScan()
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        magic = f.read(8)
+        if magic != MAGIC:
+            if len(magic) < 8 and MAGIC.startswith(magic):
+                raise McapFormatError(f"file is empty or cut inside the MCAP magic ({size} bytes)")
+            raise McapFormatError("not an MCAP file (bad magic bytes at offset 0)")
+        pos = 8
+        loose: list[tuple[int, int, bytes]] = []  # (channel, log_time, payload) outside chunks
+
+        def flush_loose():
+            if not loose:
+                return None
+            buf = b"".join(p for _, _, p in loose)
+            ln = np.array([len(p) for _, _, p in loose], np.int64)
+            st = np.concatenate([[0], np.cumsum(ln)[:-1]]).astype(np.int64)
+            blk = MessageBlock(np.frombuffer(buf, np.uint8), np.array([c for c, _, _ in loose], np.uint16),
+                               np.array([t for _, t, _ in loose], np.uint64), st, ln)
+            loose.clear()
+            return blk
+
+        while True:
+            hdr = f.read(9)
+            if len(hdr) == 0:
+                scan.issues.append(ScanIssue(pos, "file ends without footer/closing magic (truncated: "
+                                                  "recording was interrupted?); all complete records were read",
+                                             False))
+                break
+            if len(hdr) < 9:
+                scan.issues.append(ScanIssue(pos, f"file truncated inside a record header at byte {pos} "
+                                                  f"of {size}; the records before it were read", False))
+                break
+            op, ln = struct.unpack("<BQ", hdr)
+            if ln > MAX_RECORD or (op == 0 or op > 0x0F and op < 0x80):
+                raise McapFormatError(f"corrupt record at byte {pos}: opcode 0x{op:02x}, length {ln}")
+            if pos + 9 + ln > size:
+                scan.issues.append(ScanIssue(pos, f"file truncated inside a record (opcode 0x{op:02x}) at byte "
+                                                  f"{pos} of {size}: its {ln} bytes are not all there; the "
+                                                  "records before it were read", False))
+                break
+            content = f.read(ln)
+            where = f"record at byte {pos}"
+            pos += 9 + ln
+            try:
+                if op == OP_CHUNK:
+                    blk = flush_loose()
+                    if blk is not None:
+                        yield blk
+                    cu = _Cursor(content)
+                    cu.u64(), cu.u64()
+                    usize = cu.u64()
+                    crc = cu.u32()
+                    comp = cu.s()
+                    clen = cu.u64()
+                    data = cu.raw(clen)
+                    try:
+                        body = _decompress(data, comp, usize)
+                    except McapFormatError:
+                        raise
+                    except Exception as e:  # zstd/lz4 errors have no common base
+                        raise McapFormatError(f"chunk {where} cannot be decompressed ({comp}): {e}") from None
+                    if len(body) != usize:
+                        raise McapFormatError(f"chunk {where}: decompressed to {len(body)} bytes, header "
+                                              f"says {usize}")
+                    if validate_crc and crc and zlib.crc32(body) != crc:
+                        raise McapFormatError(f"chunk {where}: CRC mismatch (corrupt bytes)")
+                    yield _split_records(body, f"chunk {where}", scan)
+                elif op == OP_MESSAGE:
+                    cid, _seq, lt, _pt = struct.unpack_from("<HIQQ", content, 0)
+                    loose.append((cid, lt, content[MSG_FIXED:]))
+                elif op == OP_SCHEMA:
+                    s = _parse_schema(content)
+                    scan.schemas.setdefault(s.id, s)
+                elif op == OP_CHANNEL:
+                    c = _parse_channel(content)
+                    scan.channels.setdefault(c.id, c)
+                elif op == OP_METADATA:
+                    name, md = _parse_metadata(content)
+                    scan.metadata[name] = md
+                elif op == OP_HEADER:
+                    cu = _Cursor(content)
+                    scan.profile = cu.s()
+                    scan.library = cu.s()
+                elif op == OP_FOOTER:
+                    tail = f.read(8)
+                    if tail != MAGIC:
+                        scan.issues.append(ScanIssue(pos, "closing magic missing or damaged after the footer", False))
+                    else:
+                        scan.complete = True
+                    break
+            except (struct.error, UnicodeDecodeError) as e:
+                raise McapFormatError(f"corrupt {where} (opcode 0x{op:02x}): {e}") from None
+        blk = flush_loose()
+        if blk is not None:
+            yield blk
+
+
+def payloads(block: MessageBlock, sel: np.ndarray) -> list[bytes]:
+    """Payload bytes of the selected messages of a block (for the generic decoder)."""
+    b = block.buf
+    return [b[s:s + n].tobytes() for s, n in zip(block.start[sel].tolist(), block.length[sel].tolist())]
+
+
+def gather_rows(block: MessageBlock, sel: np.ndarray, width: int) -> np.ndarray:
+    """(n, width) uint8 array of the payloads ``sel`` (all of length ``width``)."""
+    st = block.start[sel]
+    if len(st) == 0:
+        return np.zeros((0, width), np.uint8)
+    if len(st) > 1 and np.all(np.diff(st) == np.diff(st)[0]) and np.diff(st)[0] >= width:
+        stride = int(np.diff(st)[0])
+        base = np.lib.stride_tricks.as_strided(block.buf[int(st[0]):], shape=(len(st), width), strides=(stride, 1))
+        return np.array(base)
+    return block.buf[st[:, None] + np.arange(width)[None, :]]
+
+
+__all__ = ["McapFileWriter", "McapFormatError", "McapScan", "MessageBlock", "scan_mcap", "message_records",
+           "payloads", "gather_rows", "io"]

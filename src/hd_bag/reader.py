@@ -1,0 +1,705 @@
+"""Contract bag reader: :func:`read_mission`, :func:`validate_bag`, :func:`iter_messages`.
+
+One streaming pass over the MCAP (:func:`hd_bag.mcapio.scan_mcap`, one chunk in
+memory at a time) decodes the contract topics into numpy arrays: same-layout
+JointState/Temperature messages by the vectorised CDR path, anything else
+through the generic ``mcap-ros2-support`` decoder. The assembled data are then
+checked against ``../shared/CONTRACT.md``:
+
+What is *fatal* (``read_mission`` raises :class:`BagError`; ``validate_bag``
+reports an error):
+  not an MCAP file; corrupt bytes (CRC mismatch, undecodable chunk, impossible
+  record); no ``/hd/joint_states`` (or fewer than 2 usable samples); a contract
+  topic with the wrong message type or encoding; JointState without the
+  ``motor``/``output`` joints; missing ``hd_mission`` metadata, a missing
+  required key, an unparsable or absurd value (gear ratio <= 0, k_t <= 0,
+  non-finite numbers, unknown source or contract version); grossly
+  non-monotonic stamps (a backward jump of more than 50 sample periods, more
+  than 10 % of samples out of order, or most stamps repeated: the stamp clock
+  is broken, re-sorting would invent a history); more than 1 % of a signal
+  beyond physical limits.
+
+What the reader *repairs and reports* (``Mission.report``; validate: warning
+unless noted): a truncated file (complete chunks recovered; validate: error),
+slightly out-of-order samples (re-sorted), duplicate stamps (first kept),
+dropouts (``report.gaps``, ``Mission.segment`` split at gaps > 10 samples,
+never interpolated), NaN (kept), isolated values beyond physical limits (set to
+NaN; validate: error per sample), a sample rate outside 100 Hz to 20 kHz
+(validate: error), missing ``/hd/command`` or ``/hd/temperature`` (empty arrays),
+temperature frames other than ``motor_winding``/``gearbox`` (skipped; validate:
+error), missing ``offered_qos_profiles`` (validate: warning).
+"""
+
+from __future__ import annotations
+
+import heapq
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Iterator
+
+import numpy as np
+
+from . import cdr
+from .errors import BagError, Violation
+from .mcapio import McapFormatError, McapScan, MessageBlock, gather_rows, payloads, scan_mcap
+from .mission import (CONTRACT_TOPICS, JOINT_SIGNALS, MAX_INTERP_GAP_SAMPLES, REQUIRED_META_KEYS, SOURCES,
+                      TEMPERATURE_FRAMES, TOPIC_COMMAND, TOPIC_JOINT_STATES, TOPIC_TEMPERATURE, Mission,
+                      MissionMeta, ReadReport)
+from .writer import SIM_TOPICS, TOPIC_SIM_EFFECTS, TOPIC_SIM_HEALTH, TOPIC_SIM_INTERNAL, check_meta
+
+EXPECTED_TYPES = {
+    TOPIC_JOINT_STATES: "sensor_msgs/msg/JointState",
+    TOPIC_COMMAND: "sensor_msgs/msg/JointState",
+    TOPIC_TEMPERATURE: "sensor_msgs/msg/Temperature",
+    TOPIC_SIM_INTERNAL: "sensor_msgs/msg/JointState",
+    TOPIC_SIM_HEALTH: "sensor_msgs/msg/JointState",
+    TOPIC_SIM_EFFECTS: "std_msgs/msg/String",
+}
+
+#: |value| above which a sample is not physical for an actuator of this class (SI units).
+PHYSICAL_LIMITS = {
+    "theta_m": 1e7,  # rad (unwrapped motor angle: ~1.6 million turns)
+    "theta_f": 1e5,  # rad
+    "omega_m": 1e4,  # rad/s (~95,000 rpm)
+    "omega_f": 1e3,  # rad/s
+    "tau_m": 1e3,  # N*m at the motor
+    "Q_red": 1e6,  # N*m at the output
+    "theta_ref": 1e5,  # rad
+}
+TEMPERATURE_RANGE = (-100.0, 400.0)  # degC
+RATE_RANGE = (100.0, 20_000.0)  # Hz, contract
+MAX_BACKWARD_PERIODS = 50
+MAX_REORDERED_FRACTION = 0.10
+MAX_ABSURD_FRACTION = 0.01
+_MAX_LAYOUTS = 8
+
+
+# ---------------------------------------------------------------------------
+# raw pass
+# ---------------------------------------------------------------------------
+@dataclass
+class _Problem:
+    topic: str | None
+    index: np.ndarray | None  # message indices on the topic (file order) or None
+    problem: str
+    severity: str = "error"  # error | warning
+    fatal: bool = False
+
+
+@dataclass
+class _JSAcc:
+    """Accumulated JointState groups of one topic."""
+
+    stamps: list[np.ndarray] = field(default_factory=list)
+    index: list[np.ndarray] = field(default_factory=list)
+    names: list[tuple[str, ...]] = field(default_factory=list)
+    pos: list[np.ndarray] = field(default_factory=list)
+    vel: list[np.ndarray] = field(default_factory=list)
+    eff: list[np.ndarray] = field(default_factory=list)
+
+
+@dataclass
+class _TempAcc:
+    stamps: list[np.ndarray] = field(default_factory=list)
+    index: list[np.ndarray] = field(default_factory=list)
+    value: list[np.ndarray] = field(default_factory=list)
+    frame: list[str] = field(default_factory=list)
+
+
+@dataclass
+class _Raw:
+    path: str
+    scan: McapScan
+    counts: dict[str, int] = field(default_factory=dict)
+    js: dict[str, _JSAcc] = field(default_factory=dict)
+    temp: _TempAcc = field(default_factory=_TempAcc)
+    strings: dict[str, list[tuple[int, str]]] = field(default_factory=dict)
+    problems: list[_Problem] = field(default_factory=list)
+    bad_channels: set[int] = field(default_factory=set)
+    checked_channels: set[int] = field(default_factory=set)
+
+
+def _decode_js(block: MessageBlock, sel: np.ndarray, first_index: int, acc: _JSAcc, schema) -> int:
+    """Decode the JointState messages ``sel`` of a block into ``acc``; returns the generic-path count."""
+    idx_all = first_index + np.arange(len(sel))
+    lens = block.length[sel]
+    n_generic = 0
+    for L in np.unique(lens):
+        m_L = lens == L
+        sub = sel[m_L]
+        sub_idx = idx_all[m_L]
+        rows = gather_rows(block, sub, int(L))
+        left = np.ones(len(sub), bool)
+        for _ in range(_MAX_LAYOUTS):
+            if not left.any():
+                break
+            i0 = int(np.argmax(left))
+            lay = cdr.parse_jointstate_layout(rows[i0].tobytes())
+            if lay is None:
+                break
+            m = left.copy()
+            m[left] = cdr.match_layout(rows[left], lay)
+            if not m[i0]:
+                break
+            r = rows[m]
+            acc.stamps.append(cdr.decode_stamps(r))
+            acc.index.append(sub_idx[m])
+            acc.names.append(lay.names)
+            acc.pos.append(cdr.decode_doubles(r, lay.offsets[0], lay.counts[0]))
+            acc.vel.append(cdr.decode_doubles(r, lay.offsets[1], lay.counts[1]))
+            acc.eff.append(cdr.decode_doubles(r, lay.offsets[2], lay.counts[2]))
+            left &= ~m
+        if left.any():
+            dec = cdr.generic_decoder(schema.name, schema.data)
+            for data, ii in zip(payloads(block, sub[left]), sub_idx[left].tolist()):
+                msg = dec(data)
+                st = msg.header.stamp
+                acc.stamps.append(np.array([int(st.sec) * 1_000_000_000 + int(st.nanosec)], np.int64))
+                acc.index.append(np.array([ii]))
+                acc.names.append(tuple(msg.name))
+                acc.pos.append(np.asarray(msg.position, np.float64)[None, :])
+                acc.vel.append(np.asarray(msg.velocity, np.float64)[None, :])
+                acc.eff.append(np.asarray(msg.effort, np.float64)[None, :])
+                n_generic += 1
+    return n_generic
+
+
+def _decode_temp(block: MessageBlock, sel: np.ndarray, first_index: int, acc: _TempAcc, schema) -> None:
+    idx_all = first_index + np.arange(len(sel))
+    lens = block.length[sel]
+    for L in np.unique(lens):
+        m_L = lens == L
+        sub = sel[m_L]
+        sub_idx = idx_all[m_L]
+        rows = gather_rows(block, sub, int(L))
+        left = np.ones(len(sub), bool)
+        for _ in range(_MAX_LAYOUTS):
+            if not left.any():
+                break
+            i0 = int(np.argmax(left))
+            frame = cdr.parse_temperature_frame(rows[i0].tobytes())
+            if frame is None:
+                break
+            tmpl, mask, off = cdr.temperature_layout(frame)
+            if off + 16 > L:
+                break
+            m = left.copy()
+            m[left] = np.all(rows[left][:, :len(tmpl)][:, mask] == tmpl[mask], axis=1)
+            if not m[i0]:
+                break
+            r = rows[m]
+            acc.stamps.append(cdr.decode_stamps(r))
+            acc.index.append(sub_idx[m])
+            acc.value.append(cdr.decode_doubles(r, off, 1)[:, 0].copy())
+            acc.frame.append(frame)
+            left &= ~m
+        if left.any():
+            dec = cdr.generic_decoder(schema.name, schema.data)
+            for data, ii in zip(payloads(block, sub[left]), sub_idx[left].tolist()):
+                msg = dec(data)
+                st = msg.header.stamp
+                acc.stamps.append(np.array([int(st.sec) * 1_000_000_000 + int(st.nanosec)], np.int64))
+                acc.index.append(np.array([ii]))
+                acc.value.append(np.array([float(msg.temperature)]))
+                acc.frame.append(str(msg.header.frame_id))
+
+
+def _scan(path: str, include_sim: bool) -> _Raw:
+    if not os.path.exists(path):
+        raise BagError(path, "no such file")
+    if os.path.isdir(path):
+        raise BagError(path, "is a directory, not an MCAP file (pass the .mcap inside it)")
+    raw = _Raw(path, McapScan())
+    wanted = set(CONTRACT_TOPICS) | (set(SIM_TOPICS) if include_sim else set())
+    idx_next: dict[str, int] = {}
+    try:
+        for block in scan_mcap(path, raw.scan):
+            if len(block.channel) == 0:
+                continue
+            for cid in np.unique(block.channel).tolist():
+                ch = raw.scan.channels.get(cid)
+                sel = np.nonzero(block.channel == cid)[0]
+                if ch is None:
+                    raw.problems.append(_Problem(None, None, f"{len(sel)} messages on channel id {cid} that no "
+                                                 "Channel record declares (skipped)"))
+                    continue
+                topic = ch.topic
+                raw.counts[topic] = raw.counts.get(topic, 0) + len(sel)
+                first = idx_next.get(topic, 0)
+                idx_next[topic] = first + len(sel)
+                if topic not in wanted or cid in raw.bad_channels:
+                    continue
+                schema = raw.scan.schemas.get(ch.schema_id)
+                if cid not in raw.checked_channels:
+                    raw.checked_channels.add(cid)
+                    expected = EXPECTED_TYPES[topic]
+                    got = cdr.normalise_type(schema.name) if schema else None
+                    prob = None
+                    if schema is None:
+                        prob = f"channel {cid} refers to schema {ch.schema_id}, which is not in the file"
+                    elif got != expected:
+                        prob = f"wrong message type {schema.name!r} (contract: {expected})"
+                    elif ch.message_encoding != "cdr":
+                        prob = f"message encoding {ch.message_encoding!r} (contract: cdr)"
+                    elif schema.encoding != "ros2msg":
+                        prob = f"schema encoding {schema.encoding!r} (contract: ros2msg)"
+                    if prob:
+                        raw.bad_channels.add(cid)
+                        raw.problems.append(_Problem(topic, None, prob, fatal=topic in CONTRACT_TOPICS))
+                        continue
+                    if "offered_qos_profiles" not in ch.metadata:
+                        raw.problems.append(_Problem(topic, None, "channel has no offered_qos_profiles metadata "
+                                                     "(the contract's writers add it; readers do not need it)",
+                                                     "warning"))
+                if schema.name.endswith("JointState"):
+                    _decode_js(block, sel, first, raw.js.setdefault(topic, _JSAcc()), schema)
+                elif schema.name.endswith("Temperature"):
+                    _decode_temp(block, sel, first, raw.temp, schema)
+                else:  # std_msgs/String (/sim/effects)
+                    dec = cdr.generic_decoder(schema.name, schema.data)
+                    for data, lt in zip(payloads(block, sel), block.log_time[sel].tolist()):
+                        raw.strings.setdefault(topic, []).append((int(lt), dec(data).data))
+    except McapFormatError as e:
+        raise BagError(path, str(e)) from None
+    except Exception as e:  # generic decoder on garbage bytes and similar
+        if isinstance(e, BagError):
+            raise
+        raise BagError(path, f"undecodable message data ({type(e).__name__}: {e})") from None
+    for iss in raw.scan.issues:
+        raw.problems.append(_Problem(None, None, iss.problem, "error", iss.fatal))
+    if raw.scan.profile and raw.scan.profile != "ros2":
+        raw.problems.append(_Problem(None, None, f"MCAP profile {raw.scan.profile!r} (contract: ros2)"))
+    return raw
+
+
+# ---------------------------------------------------------------------------
+# assembly
+# ---------------------------------------------------------------------------
+def _parse_meta(raw: _Raw) -> MissionMeta | None:
+    rec = raw.scan.metadata.get("hd_mission")
+    if rec is None:
+        names = sorted(raw.scan.metadata)
+        raw.problems.append(_Problem(None, None, "no 'hd_mission' metadata record" +
+                                     (f" (metadata records present: {names})" if names else ""), fatal=True))
+        return None
+    missing = [k for k in REQUIRED_META_KEYS if k not in rec]
+    if missing:
+        raw.problems.append(_Problem(None, None, f"hd_mission metadata lacks required keys {missing}", fatal=True))
+        return None
+    if rec["contract"].strip() != "1":
+        raw.problems.append(_Problem(None, None, f"hd_mission contract version {rec['contract']!r} is not "
+                                     "supported (this reader knows version 1)", fatal=True))
+        return None
+    bad = []
+
+    def num(k, conv):
+        try:
+            return conv(rec[k].strip())
+        except ValueError:
+            bad.append(f"{k} = {rec[k]!r} is not a number")
+            return float("nan")
+
+    mi = num("mission_index", int)
+    oh = num("operating_hours", float)
+    gr = num("gear_ratio", float)
+    kt = num("torque_constant", float)
+    if bad:
+        raw.problems.append(_Problem(None, None, "hd_mission metadata: " + "; ".join(bad), fatal=True))
+        return None
+    extra = {k: v for k, v in rec.items() if k not in REQUIRED_META_KEYS}
+    meta = MissionMeta(actuator_id=rec["actuator_id"], mission_index=mi, operating_hours=oh, gear_ratio=gr,
+                       torque_constant=kt, source=rec["source"].strip(), contract="1", extra=extra)
+    probs = check_meta(meta)
+    if probs:
+        raw.problems.append(_Problem(None, None, "absurd hd_mission metadata: " + "; ".join(probs), fatal=True))
+        return None
+    return meta
+
+
+def _order(raw: _Raw, topic: str, stamps: np.ndarray, index: np.ndarray, report_into: ReadReport | None):
+    """Sort by stamp (stable), find reordered/duplicate samples; returns (order, keep mask after sort, stats)."""
+    n = len(stamps)
+    arrival = np.argsort(index, kind="stable")  # file order
+    s_arr = stamps[arrival]
+    cm = np.maximum.accumulate(s_arr) if n else s_arr
+    late = s_arr < cm
+    back_ns = int((cm - s_arr).max()) if n else 0
+    order = arrival[np.argsort(s_arr, kind="stable")]
+    s = stamps[order]
+    dup = np.zeros(n, bool)
+    if n > 1:
+        dup[1:] = s[1:] == s[:-1]
+    return order, ~dup, late, back_ns, index[arrival][late], index[order][dup]
+
+
+def _js_matrix(raw: _Raw, topic: str, acc: _JSAcc, want: tuple[str, ...], fields: tuple[str, ...]):
+    """Concatenate JointState groups into stamps, index and an (n, len(want)) matrix of chosen fields."""
+    n_tot = sum(len(s) for s in acc.stamps)
+    out = np.full((n_tot, len(want)), np.nan)
+    stamps = np.empty(n_tot, np.int64)
+    index = np.empty(n_tot, np.int64)
+    p = 0
+    missing_names: dict[str, int] = {}
+    short: list[np.ndarray] = []
+    for s, ix, names, pos, vel, eff in zip(acc.stamps, acc.index, acc.names, acc.pos, acc.vel, acc.eff):
+        k = len(s)
+        stamps[p:p + k] = s
+        index[p:p + k] = ix
+        arrs = {"position": pos, "velocity": vel, "effort": eff}
+        for c, (nm, fld) in enumerate(zip(want, fields)):
+            if nm not in names:
+                missing_names[nm] = missing_names.get(nm, 0) + k
+                continue
+            j = names.index(nm)
+            a = arrs[fld]
+            if j < a.shape[1]:
+                out[p:p + k, c] = a[:, j]
+            else:
+                short.append(ix)
+        p += k
+    for nm, k in missing_names.items():
+        raw.problems.append(_Problem(topic, None, f"joint name {nm!r} missing in {k} of {n_tot} messages "
+                                     f"(names must include {list(dict.fromkeys(want))})",
+                                     fatal=(k == n_tot)))
+    if short:
+        ix = np.unique(np.concatenate(short))
+        raw.problems.append(_Problem(topic, ix, "position/velocity/effort array shorter than name "
+                                     "(value read as NaN)"))
+    return stamps, index, out
+
+
+def _limit_check(raw: _Raw, topic: str, name: str, v: np.ndarray, index: np.ndarray, lo: float, hi: float,
+                 unit: str) -> np.ndarray:
+    bad = ~np.isnan(v) & ~((v >= lo) & (v <= hi))
+    nb = int(bad.sum())
+    if nb:
+        frac = nb / max(len(v), 1)
+        raw.problems.append(_Problem(topic, index[bad], f"{name} beyond physical limits [{lo:g}, {hi:g}] {unit} "
+                                     f"({nb} samples, e.g. {v[bad][0]!r}; read as NaN)",
+                                     fatal=frac > MAX_ABSURD_FRACTION))
+        v = v.copy()
+        v[bad] = np.nan
+    return v
+
+
+def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
+    path = raw.path
+    rep = ReadReport(path=path, n_messages=dict(raw.counts))
+    meta = _parse_meta(raw)
+    # ---- joint states -----------------------------------------------------
+    acc = raw.js.get(TOPIC_JOINT_STATES)
+    if acc is None or not acc.stamps:
+        why = "no /hd/joint_states messages" if TOPIC_JOINT_STATES not in raw.counts else \
+            "/hd/joint_states could not be decoded"
+        if not any(p.fatal and p.topic == TOPIC_JOINT_STATES for p in raw.problems):
+            raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, why + " (required topic)", fatal=True))
+        return None
+    want = ("motor", "output", "motor", "output", "motor", "output")
+    fields = ("position", "position", "velocity", "velocity", "effort", "effort")
+    stamps, index, M = _js_matrix(raw, TOPIC_JOINT_STATES, acc, want, fields)
+    if any(p.fatal for p in raw.problems):
+        return None
+    for c, nm in enumerate(JOINT_SIGNALS):
+        lim = PHYSICAL_LIMITS[nm]
+        M[:, c] = _limit_check(raw, TOPIC_JOINT_STATES, nm, M[:, c], index, -lim, lim, "SI")
+    n_raw = len(stamps)
+    order, keep, late, back_ns, late_idx, dup_idx = _order(raw, TOPIC_JOINT_STATES, stamps, index, rep)
+    s = stamps[order][keep]
+    M = M[order][keep]
+    n = len(s)
+    if n < 2:
+        raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, f"only {n} distinct header.stamp values in "
+                                     f"{n_raw} messages: need at least 2 samples", fatal=True))
+        return None
+    if n < 0.5 * n_raw:
+        raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, f"header.stamp repeats: {n_raw - n} of {n_raw} "
+                                     "messages share a stamp (is header.stamp filled in?)", fatal=True))
+    d = np.diff(s)
+    dt_ns = float(np.median(d))
+    dt = dt_ns * 1e-9
+    if late.any():
+        frac = late.sum() / n_raw
+        fatal = back_ns > MAX_BACKWARD_PERIODS * dt_ns or frac > MAX_REORDERED_FRACTION
+        raw.problems.append(_Problem(TOPIC_JOINT_STATES, late_idx,
+                                     f"header.stamp not monotonic: {int(late.sum())} samples arrive after a "
+                                     f"later stamp (largest step back {back_ns * 1e-9:.6g} s = "
+                                     f"{back_ns / dt_ns:.1f} sample periods)" +
+                                     ("; the stamp clock is broken, not slightly out of order" if fatal else
+                                      "; re-sorted"),
+                                     "error" if fatal else "warning", fatal))
+        rep.n_reordered = int(late.sum())
+        if not fatal:
+            rep.notes.append(f"re-sorted {int(late.sum())} out-of-order joint-state samples by header.stamp "
+                             f"(largest step back {back_ns * 1e-9:.3g} s)")
+    if len(dup_idx):
+        rep.n_duplicates = len(dup_idx)
+        raw.problems.append(_Problem(TOPIC_JOINT_STATES, dup_idx, "duplicate header.stamp (dropped, first kept)",
+                                     "warning"))
+        rep.notes.append(f"dropped {len(dup_idx)} joint-state messages with a duplicate header.stamp "
+                         "(kept the first received)")
+    fs = 1.0 / dt
+    if not RATE_RANGE[0] * 0.98 <= fs <= RATE_RANGE[1] * 1.02:
+        raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, f"sample rate {fs:.4g} Hz (median stamp step) is "
+                                     f"outside the contract's {RATE_RANGE[0]:g} Hz to {RATE_RANGE[1]:g} Hz"))
+        rep.notes.append(f"sample rate {fs:.4g} Hz is outside the contract range; read anyway")
+    missing = np.rint(d / dt_ns).astype(np.int64) - 1
+    gi = np.nonzero(missing >= 1)[0]
+    rep.gaps = [(int(i + 1), int(missing[i])) for i in gi]
+    big = missing > MAX_INTERP_GAP_SAMPLES
+    segment = np.concatenate([[0], np.cumsum(big)]).astype(np.int32)
+    if len(gi):
+        tot = int(missing[gi].sum())
+        raw.problems.append(_Problem(TOPIC_JOINT_STATES, None,
+                                     f"{len(gi)} dropout gaps, {tot} samples missing "
+                                     f"({int(big.sum())} longer than {MAX_INTERP_GAP_SAMPLES} samples)", "warning"))
+        rep.notes.append(f"{len(gi)} dropout gaps ({tot} samples missing at nominal {fs:.4g} Hz) marked in "
+                         f"report.gaps; not interpolated; {int(big.sum())} gaps longer than "
+                         f"{MAX_INTERP_GAP_SAMPLES} samples split the mission into {int(segment[-1]) + 1} segments")
+    rep.nominal_dt = dt
+    rep.n_nan = {nm: int(np.isnan(M[:, c]).sum()) for c, nm in enumerate(JOINT_SIGNALS)}
+    t0 = int(s[0])
+    t = (s - t0) * 1e-9
+    # ---- command ------------------------------------------------------------
+    t_cmd = np.zeros(0)
+    theta_ref = np.zeros(0)
+    cacc = raw.js.get(TOPIC_COMMAND)
+    if cacc is not None and cacc.stamps:
+        cs, cidx, CM = _js_matrix(raw, TOPIC_COMMAND, cacc, ("output",), ("position",))
+        if any(p.fatal for p in raw.problems):
+            return None
+        v = _limit_check(raw, TOPIC_COMMAND, "theta_ref", CM[:, 0], cidx, -PHYSICAL_LIMITS["theta_ref"],
+                         PHYSICAL_LIMITS["theta_ref"], "rad")
+        order, keep, late, back_ns, late_idx, dup_idx = _order(raw, TOPIC_COMMAND, cs, cidx, None)
+        if late.any():
+            raw.problems.append(_Problem(TOPIC_COMMAND, late_idx, "header.stamp not monotonic (re-sorted)",
+                                         "warning"))
+            rep.notes.append(f"re-sorted {int(late.sum())} out-of-order command samples")
+        if len(dup_idx):
+            raw.problems.append(_Problem(TOPIC_COMMAND, dup_idx, "duplicate header.stamp (dropped)", "warning"))
+            rep.notes.append(f"dropped {len(dup_idx)} command messages with a duplicate stamp")
+        t_cmd = (cs[order][keep] - t0) * 1e-9
+        theta_ref = v[order][keep]
+        rep.n_nan["theta_ref"] = int(np.isnan(theta_ref).sum())
+    else:
+        raw.problems.append(_Problem(TOPIC_COMMAND, None, "no /hd/command messages: theta_ref is empty "
+                                     "(contract topic; allowed for rigs without a position command)", "warning"))
+        rep.notes.append("no /hd/command: theta_ref empty")
+    # ---- temperature -----------------------------------------------------------
+    temps: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    tacc = raw.temp
+    if tacc.stamps:
+        frames = np.concatenate([np.full(len(s_), i) for i, s_ in enumerate(tacc.stamps)])
+        fr_names = tacc.frame
+        ts = np.concatenate(tacc.stamps)
+        tix = np.concatenate(tacc.index)
+        tv = np.concatenate(tacc.value)
+        tv = _limit_check(raw, TOPIC_TEMPERATURE, "temperature", tv, tix, *TEMPERATURE_RANGE, "degC")
+        by_frame: dict[str, list[int]] = {}
+        for i, fr in enumerate(fr_names):
+            by_frame.setdefault(fr, []).append(i)
+        for fr, groups in by_frame.items():
+            m = np.isin(frames, groups)
+            if fr not in TEMPERATURE_FRAMES:
+                raw.problems.append(_Problem(TOPIC_TEMPERATURE, tix[m], f"header.frame_id {fr!r} is not one of "
+                                             f"{list(TEMPERATURE_FRAMES)} (skipped)"))
+                rep.notes.append(f"skipped {int(m.sum())} temperature messages with frame_id {fr!r}")
+                continue
+            order, keep, late, _, late_idx, dup_idx = _order(raw, TOPIC_TEMPERATURE, ts[m], tix[m], None)
+            if late.any():
+                rep.notes.append(f"re-sorted {int(late.sum())} out-of-order {fr} temperature samples")
+            if len(dup_idx):
+                rep.notes.append(f"dropped {len(dup_idx)} {fr} temperature messages with a duplicate stamp")
+            temps[fr] = ((ts[m][order][keep] - t0) * 1e-9, tv[m][order][keep])
+            rep.n_nan[f"temperature[{fr}]"] = int(np.isnan(temps[fr][1]).sum())
+    else:
+        raw.problems.append(_Problem(TOPIC_TEMPERATURE, None, "no /hd/temperature messages (contract topic; "
+                                     "temperature_on_t() gives NaN)", "warning"))
+        rep.notes.append("no /hd/temperature: temperatures empty")
+    for p in raw.problems:
+        if p.topic is None and not p.fatal and p.severity == "error":
+            rep.notes.append(p.problem)
+    if meta is None or any(p.fatal for p in raw.problems):
+        return None
+    # ---- ground truth (evaluation only) -------------------------------------------
+    sim: dict[str, Any] = {}
+    if include_sim:
+        for topic in (TOPIC_SIM_INTERNAL, TOPIC_SIM_HEALTH):
+            a = raw.js.get(topic)
+            if a is None or not a.stamps:
+                continue
+            names = list(dict.fromkeys(nm for g in a.names for nm in g))
+            ss, ii, V = _js_matrix(raw, topic, a, tuple(names), ("position",) * len(names))
+            order = np.argsort(ss, kind="stable")
+            d_: dict[str, Any] = {"t": (ss[order] - t0) * 1e-9}
+            for c, nm in enumerate(names):
+                d_[nm] = V[order, c]
+            if topic == TOPIC_SIM_HEALTH:
+                d_ = {k: (float(v[0]) if k != "t" else float(v[0])) for k, v in d_.items()}
+            sim[topic] = d_
+        eff = raw.strings.get(TOPIC_SIM_EFFECTS)
+        if eff:
+            try:
+                sim[TOPIC_SIM_EFFECTS] = json.loads(eff[-1][1])
+            except json.JSONDecodeError as e:
+                raise BagError(path, f"/sim/effects is not valid JSON: {e}") from None
+    return Mission(meta=meta, t=t, theta_m=M[:, 0].copy(), theta_f=M[:, 1].copy(), omega_m=M[:, 2].copy(),
+                   omega_f=M[:, 3].copy(), tau_m=M[:, 4].copy(), Q_red=M[:, 5].copy(), t_cmd=t_cmd,
+                   theta_ref=theta_ref, temperatures=temps, t0_ns=t0, segment=segment, report=rep, sim=sim)
+
+
+def _fatal_message(raw: _Raw) -> str:
+    f = [p for p in raw.problems if p.fatal]
+    parts = []
+    for p in f:
+        s = (f"{p.topic}: " if p.topic else "") + p.problem
+        if p.index is not None and len(p.index):
+            s += f" (message {int(p.index[0])}" + (f" and {len(p.index) - 1} more)" if len(p.index) > 1 else ")")
+        parts.append(s)
+    return "; ".join(parts)
+
+
+def read_mission(path: str | os.PathLike, *, include_sim: bool = False) -> Mission:
+    """Read one contract bag into a :class:`Mission` (SI arrays, report of every repair).
+
+    Raises :class:`BagError` (message starts with the path) for the fatal
+    problems listed in this module's docstring. ``include_sim=True`` also reads
+    the ``/sim/...`` ground truth into ``Mission.sim`` (evaluation code only).
+    """
+    path = os.fspath(path)
+    raw = _scan(path, include_sim)
+    m = _assemble(raw, include_sim)
+    if m is None or any(p.fatal for p in raw.problems):
+        raise BagError(path, _fatal_message(raw) or "unusable bag")
+    return m
+
+
+def validate_bag(path: str | os.PathLike) -> list[Violation]:
+    """Every contract finding for one bag: errors and warnings (see the module docstring).
+
+    Never raises for a bad bag: a bag that cannot be opened gives one error
+    violation. Per-sample findings carry the message index on their topic.
+    """
+    path = os.fspath(path)
+    try:
+        raw = _scan(path, include_sim=True)
+    except BagError as e:
+        return [Violation(path, None, None, e.problem)]
+    try:
+        _assemble(raw, include_sim=True)
+    except BagError as e:
+        raw.problems.append(_Problem(None, None, e.problem, fatal=True))
+    out: list[Violation] = []
+    for p in raw.problems:
+        if p.index is None:
+            out.append(Violation(path, p.topic, None, p.problem, p.severity))
+        else:
+            out.extend(Violation(path, p.topic, int(i), p.problem, p.severity) for i in np.sort(p.index).tolist())
+    return out
+
+
+# ---------------------------------------------------------------------------
+# replay
+# ---------------------------------------------------------------------------
+_ROS_CLASSES: dict[str, Any] = {}
+
+
+def _ros_class(type_name: str):
+    if type_name not in _ROS_CLASSES:
+        try:
+            from rosidl_runtime_py.utilities import get_message
+
+            _ROS_CLASSES[type_name] = get_message(type_name)
+        except Exception:  # no ROS wheels, or an unknown type
+            _ROS_CLASSES[type_name] = None
+    return _ROS_CLASSES[type_name]
+
+
+def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None, *, ros: bool = True
+                  ) -> Iterator[tuple[str, int, int, Any]]:
+    """Yield ``(topic, stamp_ns, log_time_ns, message)`` in log-time order, streaming.
+
+    ``message`` is the real ROS class instance (``sensor_msgs.msg.JointState``
+    ...) deserialised by rclpy's C serializer when the ROS wheels are present
+    and ``ros`` is true, else an ``mcap-ros2-support`` dynamic object with the
+    same fields. ``stamp_ns`` is ``header.stamp`` for messages with a header,
+    else the log time. Order: sorted within each chunk and merged across
+    chunks whose time ranges overlap their neighbours (a bag whose chunks
+    overlap by more than one chunk is yielded in near, not exact, order).
+    """
+    path = os.fspath(path)
+    want = set(topics) if topics is not None else None
+    scan = McapScan()
+    deser = None
+    if ros:
+        try:
+            from rclpy.serialization import deserialize_message as deser  # noqa: N813
+        except Exception:
+            deser = None
+    heap: list[tuple[int, int, str, int, Any]] = []
+    seq = 0
+
+    def decode(topic: str, schema, data: bytes):
+        cls = _ros_class(cdr.normalise_type(schema.name)) if deser is not None else None
+        if cls is not None:
+            return deser(data, cls)
+        return cdr.generic_decoder(schema.name, schema.data)(data)
+
+    try:
+        for block in scan_mcap(path, scan):
+            if len(block.channel) == 0:
+                continue
+            lo = int(block.log_time.min())
+            while heap and heap[0][0] <= lo:
+                lt, _, topic, st, msg = heapq.heappop(heap)
+                yield topic, st, lt, msg
+            order = np.argsort(block.log_time, kind="stable")
+            for i in order.tolist():
+                ch = scan.channels.get(int(block.channel[i]))
+                if ch is None or (want is not None and ch.topic not in want):
+                    continue
+                schema = scan.schemas.get(ch.schema_id)
+                if schema is None or schema.encoding != "ros2msg":
+                    continue
+                s0 = int(block.start[i])
+                data = block.buf[s0:s0 + int(block.length[i])].tobytes()
+                msg = decode(ch.topic, schema, data)
+                hdr = getattr(msg, "header", None)
+                lt = int(block.log_time[i])
+                st = int(hdr.stamp.sec) * 1_000_000_000 + int(hdr.stamp.nanosec) if hdr is not None else lt
+                heapq.heappush(heap, (lt, seq, ch.topic, st, msg))
+                seq += 1
+    except McapFormatError as e:
+        raise BagError(path, str(e)) from None
+    while heap:
+        lt, _, topic, st, msg = heapq.heappop(heap)
+        yield topic, st, lt, msg
+
+
+def bag_summary(path: str | os.PathLike) -> dict[str, Any]:
+    """Topics, counts, rates, duration and metadata of a bag (for ``hdphm inspect``)."""
+    path = os.fspath(path)
+    scan = McapScan()
+    per: dict[str, dict[str, Any]] = {}
+    try:
+        for block in scan_mcap(path, scan):
+            for cid in np.unique(block.channel).tolist():
+                ch = scan.channels.get(cid)
+                if ch is None:
+                    continue
+                lt = block.log_time[block.channel == cid]
+                d = per.setdefault(ch.topic, {"type": scan.schemas[ch.schema_id].name if ch.schema_id in
+                                              scan.schemas else "?", "count": 0, "t0": math.inf, "t1": -math.inf})
+                d["count"] += len(lt)
+                d["t0"] = min(d["t0"], int(lt.min()))
+                d["t1"] = max(d["t1"], int(lt.max()))
+    except McapFormatError as e:
+        raise BagError(path, str(e)) from None
+    for d in per.values():
+        span = (d["t1"] - d["t0"]) * 1e-9
+        d["duration_s"] = span
+        d["rate_hz"] = (d["count"] - 1) / span if span > 0 else float("nan")
+    return {"path": path, "profile": scan.profile, "library": scan.library, "topics": per,
+            "metadata": scan.metadata, "complete": scan.complete,
+            "issues": [i.problem for i in scan.issues]}
