@@ -1,0 +1,247 @@
+"""The physics-informed LSTM: network, learnable physics weight, composite loss.
+
+Loss (paper eq. 1-4)::
+
+    L_tot = L_d + ramp(epoch) * [lambda_c L_c + nu * s]        (uncertainty form)
+    L_d   = mean over valid samples of ((Q_red_hat - Q_red) / sigma_Q)^2
+    L_c   = 1/4 sum_j mean_t (r_j / s_j)^2
+
+* ``L_d`` is the paper's MSE of Q_red, made dimensionless by the training
+  standard deviation sigma_Q (so that it is comparable with L_c); samples with
+  NaN Q_red (or any NaN input) and the first ``washout`` samples of each window
+  (the LSTM starts from a zero state) are masked out.
+* ``r_j`` are the residuals of :func:`hd_twin.physics.residuals`, evaluated on
+  the interior samples (second differences of the latent states need both
+  neighbours). ``s_j`` is either the running RMS of r_j (adaptive scaling:
+  exponential moving average, momentum ``scale_momentum``, detached) or the
+  fixed characteristic magnitude of :func:`hd_twin.physics.residual_scales`.
+  ``L_c_ref`` (always reported) uses the fixed magnitudes, so that curves are
+  comparable across epochs whatever the scaling.
+* ``lambda_c = exp(-s)`` with a learnable log-weight ``s`` and the regulariser
+  ``nu * s`` (nu = initial lambda_c): the stationary point is lambda_c =
+  nu / L_c > 0, so the weight adapts (rises as the physics is satisfied,
+  falls while it is not) but cannot collapse to zero: d/ds at any s has the
+  restoring term +nu. ``s`` is additionally clamped to lambda_c in
+  [lambda_min, lambda_max]. ``mode="fixed"`` keeps lambda_c constant
+  (``lambda_c = 0`` is the pure-data ablation).
+* ``ramp`` rises linearly from 0 to 1 over ``ramp_epochs`` (0 = off).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from . import physics as ph
+
+
+class TwinLSTM(nn.Module):
+    """Unidirectional stacked LSTM + linear head: features [B, T, n_in] -> outputs [B, T, n_out]."""
+
+    def __init__(self, n_in: int, n_out: int, hidden: int, layers: int, dropout: float):
+        super().__init__()
+        if layers < 1 or hidden < 1:
+            raise ValueError(f"LSTM needs layers >= 1 and hidden >= 1, got {layers}, {hidden}")
+        if not 0.0 <= dropout < 1.0:
+            raise ValueError(f"dropout must be in [0, 1), got {dropout}")
+        self.n_in, self.n_out, self.hidden, self.layers = n_in, n_out, hidden, layers
+        self.lstm = nn.LSTM(n_in, hidden, num_layers=layers, batch_first=True,
+                            dropout=dropout if layers > 1 else 0.0, bidirectional=False)
+        self.head = nn.Linear(hidden, n_out)
+
+    def forward(self, x: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None):
+        z, (h, c) = self.lstm(x, state)
+        return self.head(z), (h, c)
+
+
+class StreamWrapper(nn.Module):
+    """ONNX-exportable form: (x [B,T,n_in], h0 [L,B,H], c0 [L,B,H]) -> (y, h_n, c_n)."""
+
+    def __init__(self, net: TwinLSTM):
+        super().__init__()
+        self.net = net
+
+    def forward(self, x, h0, c0):
+        y, (h, c) = self.net(x, (h0, c0))
+        return y, h, c
+
+
+class LambdaC(nn.Module):
+    """Physics weight lambda_c; ``mode`` "uncertainty" (learnable, cannot collapse) or "fixed"."""
+
+    def __init__(self, init: float, mode: str = "uncertainty", lam_min: float = 1e-4, lam_max: float = 1e3):
+        super().__init__()
+        if mode not in ("uncertainty", "fixed"):
+            raise ValueError(f"lambda_c mode must be 'uncertainty' or 'fixed', got {mode!r}")
+        if not math.isfinite(init) or init < 0:
+            raise ValueError(f"initial lambda_c must be finite and >= 0, got {init}")
+        if mode == "uncertainty" and init <= 0:
+            raise ValueError("a learnable lambda_c needs a positive initial value (use mode='fixed' for 0)")
+        self.mode, self.init = mode, float(init)
+        self.lam_min, self.lam_max = float(lam_min), float(lam_max)
+        if mode == "uncertainty":
+            self.s = nn.Parameter(torch.tensor(-math.log(init), dtype=torch.float32))
+        else:
+            self.register_buffer("s", torch.tensor(-math.log(init) if init > 0 else float("inf")))
+
+    def value(self) -> torch.Tensor:
+        if self.mode == "fixed":
+            return torch.tensor(self.init)
+        s = self.s.clamp(-math.log(self.lam_max), -math.log(self.lam_min))
+        return torch.exp(-s)
+
+    def term(self, L_c: torch.Tensor) -> torch.Tensor:
+        """lambda_c L_c (+ nu s for the learnable form)."""
+        if self.mode == "fixed":
+            return self.init * L_c
+        s = self.s.clamp(-math.log(self.lam_max), -math.log(self.lam_min))
+        return torch.exp(-s) * L_c + self.init * s
+
+
+@dataclass
+class LossConfig:
+    lambda_mode: str = "uncertainty"  # "uncertainty" | "fixed"
+    lambda_init: float = 8e-2
+    adaptive_scaling: bool = True
+    scale_momentum: float = 0.95
+    ramp_epochs: int = 5  # 0 = no ramp
+    washout: int = 16  # samples at the start of each window excluded from every loss term
+
+
+class ResidualScaler(nn.Module):
+    """Running RMS of each residual (buffers, saved with the model)."""
+
+    def __init__(self, fixed: np.ndarray, adaptive: bool, momentum: float):
+        super().__init__()
+        self.adaptive, self.momentum = adaptive, float(momentum)
+        self.register_buffer("fixed", torch.as_tensor(np.asarray(fixed, dtype=np.float32)))
+        self.register_buffer("running", torch.as_tensor(np.asarray(fixed, dtype=np.float32)).clone())
+        self.register_buffer("initialised", torch.tensor(False))
+
+    def update(self, rms: torch.Tensor) -> None:
+        if not self.adaptive:
+            return
+        rms = rms.detach().clamp_min(1e-12)
+        if not bool(self.initialised):
+            self.running.copy_(rms)
+            self.initialised.fill_(True)
+        else:
+            self.running.mul_(self.momentum).add_((1 - self.momentum) * rms)
+
+    def scales(self) -> torch.Tensor:
+        return self.running if self.adaptive else self.fixed
+
+
+def ramp_factor(epoch: float, ramp_epochs: int) -> float:
+    """Linear ramp 0 -> 1 over ``ramp_epochs`` epochs (epoch counts from 0); 1 when off."""
+    if ramp_epochs <= 0:
+        return 1.0
+    return float(min(1.0, (epoch + 1) / (ramp_epochs + 1)))
+
+
+def _extra(terms, signals, xp):
+    """Sum of discovery's extra terms, or None (hd_twin.terms.evaluate_terms when present)."""
+    if not terms:
+        return None
+    try:
+        from .terms import evaluate_terms
+    except ImportError as e:  # pragma: no cover - the discovery engineer's module
+        raise ValueError(f"model config has extra_terms but hd_twin.terms is not available ({e})") from None
+    return evaluate_terms(terms, signals, xp)
+
+
+def physics_residuals_torch(pred_SI: dict, batch: dict, params: ph.TwinParams, effects, extra_terms=()):
+    """r1..r4 [B, T-2] on the interior samples, from SI predictions and batch signals.
+
+    ``pred_SI``: Q_red [N*m], u [m], y [m], each [B, T]. ``batch``: dt [B, 1]
+    (s) and the signals theta_m_dd, theta_f_dd, phi, phi_d, omega_m, tau_m,
+    temperature, theta_m, theta_f, omega_f, each [B, T].
+    """
+    dt = batch["dt"]
+    Q, u, y = pred_SI["Q_red"], pred_SI["u"], pred_SI["y"]
+    mid = slice(1, -1)
+    u_d = (u[:, 2:] - u[:, :-2]) / (2 * dt)
+    y_d = (y[:, 2:] - y[:, :-2]) / (2 * dt)
+    u_dd = (u[:, 2:] - 2 * u[:, 1:-1] + u[:, :-2]) / dt**2
+    y_dd = (y[:, 2:] - 2 * y[:, 1:-1] + y[:, :-2]) / dt**2
+    g = {k: batch[k][:, mid] for k in ("theta_m_dd", "theta_f_dd", "phi", "phi_d", "omega_m", "tau_m",
+                                        "temperature", "theta_m", "theta_f", "omega_f")}
+    Qm = Q[:, mid]
+    F_b, F_mx, F_my, F_FS = ph.closure_forces(torch, params, effects, u[:, mid], u_d, y[:, mid], y_d,
+                                              g["phi"], g["phi_d"], g["omega_m"])
+    extra_in = extra_out = None
+    if extra_terms:
+        sig = dict(g)
+        sig["Q_red"] = Qm
+        sig["i_q"] = g["tau_m"] / params.k_t
+        t_in = [t for t in extra_terms if t.get("signal", "tau_m") == "tau_m"]
+        t_out = [t for t in extra_terms if t.get("signal") == "Q_red"]
+        extra_in = _extra(t_in, sig, torch)
+        extra_out = _extra(t_out, sig, torch)
+    Q_res = ph.q_res(torch, params, effects, g["tau_m"], g["omega_m"], g["temperature"], Qm, extra_in)
+    x_dd = params.r_b * g["theta_m_dd"] + u_dd
+    return ph.residuals(torch, params, effects, Q_res=Q_res, Q_red=Qm, theta_m_dd=g["theta_m_dd"],
+                        theta_f_dd=g["theta_f_dd"], x_FS_dd=x_dd, y_FS_dd=y_dd,
+                        F_b=F_b, F_mx=F_mx, F_my=F_my, F_FS=F_FS, Q_out=extra_out)
+
+
+class PINN(nn.Module):
+    """Network + output scaling + physics loss state (lambda_c, residual scaler)."""
+
+    def __init__(self, net: TwinLSTM, params: ph.TwinParams, effects, q_mean: float, q_std: float,
+                 loss_cfg: LossConfig, extra_terms=()):
+        super().__init__()
+        self.net, self.params, self.effects = net, params, list(effects)
+        self.extra_terms = list(extra_terms)
+        self.q_mean, self.q_std = float(q_mean), float(q_std)
+        F_ref = q_std / params.r_m
+        self.u_scale = params.mu_g * F_ref / params.k_b  # m
+        self.y_scale = F_ref / params.k_FS  # m
+        self.cfg = loss_cfg
+        self.lam = LambdaC(loss_cfg.lambda_init, loss_cfg.lambda_mode)
+        self.scaler = ResidualScaler(ph.residual_scales(params, q_std), loss_cfg.adaptive_scaling, loss_cfg.scale_momentum)
+
+    def output_scales(self) -> dict:
+        """SI = mean + scale * network output, per output channel."""
+        return {"Q_red": (self.q_mean, self.q_std), "u_FS": (0.0, self.u_scale), "y_FS": (0.0, self.y_scale)}
+
+    def to_SI(self, out: torch.Tensor) -> dict:
+        return {"Q_red": self.q_mean + self.q_std * out[..., 0], "u": self.u_scale * out[..., 1],
+                "y": self.y_scale * out[..., 2]}
+
+    def losses(self, batch: dict, epoch: float = 0.0, physics: bool = True, update_scaler: bool = True) -> dict:
+        out, _ = self.net(batch["x"])
+        pred = self.to_SI(out)
+        mask = batch["mask"].clone()
+        mask[:, : self.cfg.washout] = False
+        n = mask.sum().clamp_min(1)
+        err = torch.where(mask, (pred["Q_red"] - torch.nan_to_num(batch["Q_red"])) / self.q_std, torch.zeros_like(out[..., 0]))
+        L_d = (err**2).sum() / n
+        res = {"L_d": L_d, "pred": pred}
+        use_phys = physics and (self.lam.mode != "fixed" or self.lam.init > 0)
+        if physics:
+            r = physics_residuals_torch(pred, batch, self.params, self.effects, self.extra_terms)
+            m = mask[:, 1:-1]
+            nm = m.sum().clamp_min(1)
+            R = torch.stack(r)  # [4, B, T-2]
+            ms = torch.where(m, R, torch.zeros_like(R)).pow(2).sum(dim=(1, 2)) / nm  # [4] mean squares, SI^2
+            rms = ms.sqrt()
+            if update_scaler and self.training:
+                self.scaler.update(rms)
+            L_c = (ms / self.scaler.scales().pow(2)).mean()
+            L_c_ref = (ms.detach() / self.scaler.fixed.pow(2)).mean()
+            res.update(L_c=L_c, L_c_ref=L_c_ref, r_rms=rms.detach())
+        ramp = ramp_factor(epoch, self.cfg.ramp_epochs)
+        res["ramp"] = ramp
+        res["lambda_c"] = float(self.lam.value().detach())
+        if use_phys:
+            res["L_tot"] = L_d + ramp * self.lam.term(res["L_c"])
+            res["L_tot_report"] = (L_d + res["lambda_c"] * res["L_c_ref"]).detach()
+        else:
+            res["L_tot"] = L_d
+            res["L_tot_report"] = L_d.detach()
+        return res

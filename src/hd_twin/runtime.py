@@ -1,0 +1,132 @@
+"""Streaming inference of a trained twin with ONNX Runtime (used by the onboard node).
+
+>>> twin = StreamingTwin("runs/twin_small")
+>>> twin.reset()
+>>> out = twin.step(X)          # X [n, 7] raw SI inputs, columns hd_twin.data.RAW_INPUTS
+>>> out["Q_red"]                # [m] N*m, predicted reducer output torque
+
+``step`` accepts samples at the *bag* rate ``fs_in`` (set at construction or
+by :meth:`reset`); when the model runs at a lower rate (``fs_model`` in
+config.json) the same causal anti-alias filter as in training is applied and
+every ``decimation``-th sample produces an output: ``out["index"]`` gives the
+row of X each output belongs to. LSTM state (h, c), filter state and
+decimation phase carry across calls; :meth:`reset` clears them (new mission
+or after a dropout gap).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from . import data as D
+
+OUTPUT_NAMES = ("Q_red", "x_FS", "y_FS")
+
+
+class StreamingTwin:
+    """ONNX Runtime twin with carried LSTM state; outputs in SI."""
+
+    def __init__(self, model_dir: str | Path, fs_in: float | None = None, gear_ratio: float | None = None):
+        import onnxruntime as ort
+
+        self.model_dir = Path(model_dir)
+        try:
+            self.config = json.loads((self.model_dir / "config.json").read_text())
+        except FileNotFoundError:
+            raise ValueError(f"{self.model_dir}: not a twin model directory (no config.json)") from None
+        onnx_path = self.model_dir / "twin.onnx"
+        if not onnx_path.is_file():
+            raise ValueError(f"{onnx_path}: missing; run `hdphm twin export {self.model_dir}`")
+        so = ort.SessionOptions()
+        so.intra_op_num_threads = 1
+        so.inter_op_num_threads = 1
+        self.session = ort.InferenceSession(str(onnx_path), so, providers=["CPUExecutionProvider"])
+        self.norm = D.Normalizer.from_dict(self.config["normalization"])
+        self.layers = int(self.config["arch"]["layers"])
+        self.hidden = int(self.config["arch"]["hidden"])
+        self.params = self.config["params"]
+        self.N = float(gear_ratio if gear_ratio is not None else self.params["N"])
+        self.fs_model = float(self.config["preprocessing"]["fs_model"])
+        sc = self.config["output_scales"]
+        self._scales = [tuple(sc[k]) for k in self.config["outputs"]]
+        self.reset(fs_in)
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return tuple(self.config["inputs"])
+
+    def reset(self, fs_in: float | None = None, gear_ratio: float | None = None) -> None:
+        """Zero the LSTM and filter states; optionally set the input rate [Hz] and N."""
+        if gear_ratio is not None:
+            self.N = float(gear_ratio)
+        self.fs_in = float(fs_in) if fs_in is not None else self.fs_model
+        self.decimation = D.decimation_for(self.fs_in, self.fs_model, str(self.model_dir))
+        self._sos = D.antialias_sos(self.fs_in, self.decimation)
+        self._zi = None
+        self._last = None
+        self._phase = 0
+        self.h = np.zeros((self.layers, 1, self.hidden), np.float32)
+        self.c = np.zeros((self.layers, 1, self.hidden), np.float32)
+
+    def _filter(self, X: np.ndarray) -> np.ndarray:
+        from scipy import signal as sps
+
+        if self._sos is None:
+            return X
+        if self._zi is None:
+            self._zi = np.stack([sps.sosfilt_zi(self._sos) * X[0, j] for j in range(X.shape[1])])
+        out = np.empty_like(X)
+        for j in range(X.shape[1]):
+            out[:, j], self._zi[j] = sps.sosfilt(self._sos, X[:, j], zi=self._zi[j])
+        return out
+
+    def step(self, X: np.ndarray) -> dict[str, np.ndarray]:
+        """Feed ``X[n, 7]`` raw SI inputs (columns ``self.inputs``); returns SI outputs for the emitted samples.
+
+        Keys: ``Q_red`` [N*m], ``x_FS`` [m] (= u + r_b theta_m, unwrapped),
+        ``y_FS`` [m], ``index`` (rows of X the outputs belong to). Non-finite
+        inputs are replaced by the training mean of their feature.
+        """
+        X = np.asarray(X, dtype=np.float64)
+        if X.ndim == 1:
+            X = X[None, :]
+        if X.ndim != 2 or X.shape[1] != len(self.inputs):
+            raise ValueError(f"StreamingTwin.step: X must be (n, {len(self.inputs)}) with columns {self.inputs}, got {X.shape}")
+        if len(X) == 0:
+            return {k: np.zeros(0) for k in OUTPUT_NAMES} | {"index": np.zeros(0, int)}
+        if self._sos is not None:  # the filter must not see NaN: hold the last finite value per input
+            X = X.copy()
+            for j in range(X.shape[1]):
+                bad = ~np.isfinite(X[:, j])
+                if bad.any():
+                    last = self._last[j] if self._last is not None else np.nan
+                    ok_idx = np.where(~bad, np.arange(len(X)), -1)
+                    ok_idx = np.maximum.accumulate(ok_idx)
+                    X[:, j] = np.where(ok_idx >= 0, X[np.maximum(ok_idx, 0), j], last)
+                    X[~np.isfinite(X[:, j]), j] = 0.0 if j != 5 else float(self.params["T_ref"])
+            self._last = X[-1].copy()
+        Xf = self._filter(X)
+        idx = np.arange((-self._phase) % self.decimation, len(X), self.decimation)
+        self._phase = (self._phase + len(X)) % self.decimation
+        Xd = Xf[idx]
+        F = D.features(Xd, self.N)
+        Z = self.norm.norm_features(F).astype(np.float32)[None]
+        y, self.h, self.c = self.session.run(None, {"x": Z, "h0": self.h, "c0": self.c})
+        y = y[0].astype(np.float64)
+        si = [m + s * y[:, j] for j, (m, s) in enumerate(self._scales)]
+        return {"Q_red": si[0], "x_FS": si[1] + self.params["r_b"] * Xd[:, 0], "y_FS": si[2], "index": idx}
+
+    def run_mission(self, mission) -> dict[str, np.ndarray]:
+        """Whole-mission inference, one reset per gap-free segment (as the node does after a gap)."""
+        X = D.mission_inputs(mission)
+        res = {k: [] for k in OUTPUT_NAMES + ("index",)}
+        for a, b in D.segment_bounds(mission.segment):
+            self.reset(mission.fs, mission.meta.gear_ratio)
+            o = self.step(X[a:b])
+            o["index"] = o["index"] + a
+            for k in res:
+                res[k].append(o[k])
+        return {k: np.concatenate(v) if v else np.zeros(0) for k, v in res.items()}

@@ -1,0 +1,496 @@
+"""Training of the physics-informed LSTM twin and the model directory it writes.
+
+``train_twin(missions, out_dir, cfg)`` is the pure core used by ``hdphm
+train``, ``hdphm tune`` and the ablation; it takes :class:`Mission` objects
+(read from bags by :func:`load_missions`) and writes a model directory::
+
+    config.json          inputs, features, outputs, declared effects, extra_terms,
+                         physical parameters, model_version, preprocessing,
+                         normalisation, architecture, loss settings, data hashes
+    model.pt             torch state_dict (network, lambda_c, residual scaler)
+    twin.onnx            streaming export (x, h0, c0) -> (y, h_n, c_n)
+    metrics.json         validation/training NRMSE, R^2, max error of Q_red,
+                         RMS of r1..r4, physics-only baseline, training time
+    history.json         per-epoch losses (total/data/physics, train/val), lambda_c
+    *.png                paper Figures 4-7 + lambda_c trajectory
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import hashlib
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from . import data as D
+from . import physics as ph
+
+MODEL_FORMAT = "hd_twin/1"
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # The paper's Table 1 (GPU-sized).
+    "paper": dict(layers=3, hidden=512, dropout=0.41873, lr=4.51e-3, lambda_init=8e-2,
+                  epochs=60, seq_len=256, stride=128, batch=32, fs_target=None, ramp_epochs=10),
+    # CPU/CI-sized: trains in minutes on 2 cores.
+    "small": dict(layers=2, hidden=48, dropout=0.0, lr=6e-3, lambda_init=8e-2,
+                  epochs=25, seq_len=200, stride=100, batch=32, fs_target=250.0, ramp_epochs=5),
+    # For unit tests only.
+    "tiny": dict(layers=1, hidden=8, dropout=0.0, lr=1e-2, lambda_init=8e-2,
+                 epochs=2, seq_len=48, stride=24, batch=8, fs_target=None, ramp_epochs=1),
+}
+
+
+@dataclass
+class TrainConfig:
+    """Everything that defines a training run (stored in config.json)."""
+
+    preset: str = "small"
+    layers: int = 2
+    hidden: int = 48
+    dropout: float = 0.0
+    lr: float = 6e-3
+    epochs: int = 25
+    seq_len: int = 200
+    stride: int = 100
+    batch: int = 32
+    fs_target: float | None = 250.0  # Hz; None = keep the bag rate
+    lambda_init: float = 8e-2
+    lambda_mode: str = "uncertainty"
+    adaptive_scaling: bool = True
+    ramp_epochs: int = 5
+    washout: int = 16
+    grad_clip: float = 1.0
+    weight_decay: float = 0.0
+    val_frac: float = 0.25
+    seed: int = 0
+    threads: int = 1
+    declared_effects: list[str] = field(default_factory=lambda: list(ph.DEFAULT_EFFECTS))
+    extra_terms: list[dict] = field(default_factory=list)
+    params: dict[str, Any] | None = None  # None = default_params.yaml
+    model_version: int = 1
+    parent: str | None = None  # model this one was derived from (discovery)
+    export_onnx: bool = True
+    plots: bool = True
+
+    @classmethod
+    def from_preset(cls, name: str, **overrides) -> "TrainConfig":
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r}; one of {sorted(PRESETS)}")
+        kw = dict(PRESETS[name])
+        kw.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(preset=name, **kw)
+
+    def validate(self) -> "TrainConfig":
+        for k in ("layers", "hidden", "epochs", "seq_len", "stride", "batch"):
+            v = getattr(self, k)
+            if not isinstance(v, int) or v < 1:
+                raise ValueError(f"training config: {k} must be a positive integer, got {v!r}")
+        if not (0 < self.lr < 1):
+            raise ValueError(f"training config: lr = {self.lr} outside (0, 1)")
+        if self.washout >= self.seq_len - 2:
+            raise ValueError(f"training config: washout {self.washout} leaves nothing of seq_len {self.seq_len}")
+        ph.check_effects(self.declared_effects)
+        if not isinstance(self.extra_terms, list) or not all(isinstance(t, dict) for t in self.extra_terms):
+            raise ValueError("training config: extra_terms must be a list of term dicts")
+        return self
+
+
+# ---- data assembly ------------------------------------------------------------
+def load_missions(paths: Sequence[str | Path], progress: bool = True) -> list:
+    """Read every bag under ``paths`` with ``hd_bag.read_mission`` (never the /sim topics)."""
+    from hd_bag import read_mission  # noqa: PLC0415 (bag reader of the project)
+
+    bags = D.find_bags(paths)
+    out = []
+    for i, b in enumerate(bags):
+        if progress:
+            print(f"\rreading bags {i + 1}/{len(bags)}: {b.name}   ", end="", file=sys.stderr, flush=True)
+        m = read_mission(b)
+        if not m.report.path:
+            m.report.path = str(b)
+        out.append(m)
+    if progress:
+        print(file=sys.stderr)
+    return out
+
+
+def mission_hash(m) -> str:
+    """sha256 of the bag file when it exists, else of the mission's arrays."""
+    p = Path(m.report.path) if m.report.path else None
+    if p is not None and p.is_file():
+        return D.file_sha256(p)
+    h = hashlib.sha256()
+    for a in (m.t, m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
+def mission_label(m) -> str:
+    return m.report.path or f"{m.meta.actuator_id}/mission{m.meta.mission_index}"
+
+
+def resolve_params(cfg: TrainConfig, missions: Sequence) -> ph.TwinParams:
+    """Twin parameters: config (or the default YAML) with N and k_t from the bags' metadata."""
+    base = ph.TwinParams.from_dict(cfg.params, "model config params") if cfg.params else ph.TwinParams.from_yaml()
+    Ns = {float(m.meta.gear_ratio) for m in missions}
+    kts = {float(m.meta.torque_constant) for m in missions}
+    if len(Ns) > 1 or max(kts) - min(kts) > 1e-9 * max(kts):
+        raise ValueError(f"training missions mix gear ratios {sorted(Ns)} or torque constants {sorted(kts)}; train one twin per actuator type")
+    return base.with_meta(Ns.pop(), kts.pop())
+
+
+def fs_model_for(missions: Sequence, fs_target: float | None) -> float:
+    fs = float(np.median([m.fs for m in missions]))
+    if fs_target is None or fs <= fs_target:
+        return fs
+    return fs / max(1, int(round(fs / fs_target)))
+
+
+def stack_windows(segs: Sequence[D.Segment], norm: D.Normalizer, length: int, stride: int) -> dict[str, np.ndarray]:
+    """Cut segments into windows [W, T] of every channel the loss needs (float32, x is [W, T, 11])."""
+    idx = D.windows([s.n for s in segs], length, stride)
+    if not idx:
+        raise ValueError(f"no segment is long enough for windows of {length} samples")
+    chans = ("Q_red", "theta_m_dd", "theta_f_dd", "phi", "phi_d", "temperature")
+    W = len(idx)
+    out = {k: np.zeros((W, length), np.float32) for k in chans + ("omega_m", "tau_m", "theta_m", "theta_f", "omega_f")}
+    out["mask"] = np.zeros((W, length), bool)
+    out["x"] = np.zeros((W, length, len(D.FEATURES)), np.float32)
+    out["dt"] = np.zeros((W, 1), np.float32)
+    Z = [norm.norm_features(s.F) for s in segs]
+    for w, (i, s0) in enumerate(idx):
+        seg = segs[i]
+        sl = slice(0, seg.n) if s0 < 0 else slice(s0, s0 + length)
+        n = sl.stop - sl.start
+        src = {
+            "Q_red": np.nan_to_num(seg.Q_red[sl]), "theta_m_dd": seg.theta_m_dd[sl], "theta_f_dd": seg.theta_f_dd[sl],
+            "phi": seg.phi[sl], "phi_d": seg.phi_d[sl], "temperature": seg.temperature[sl],
+            "omega_m": seg.X[sl, 1], "tau_m": seg.X[sl, 2],
+            # wrapped to [-pi, pi): float32 keeps sin(k theta_m) exact for the extra terms
+            "theta_m": np.angle(np.exp(1j * seg.X[sl, 0])), "theta_f": seg.X[sl, 3], "omega_f": seg.X[sl, 4],
+        }
+        for k, v in src.items():
+            out[k][w, :n] = v
+            if n < length:
+                out[k][w, n:] = v[-1]
+        out["x"][w, :n] = Z[i][sl]
+        if n < length:
+            out["x"][w, n:] = Z[i][sl][-1]
+        out["mask"][w, :n] = seg.mask[sl]
+        out["dt"][w, 0] = seg.dt
+    return out
+
+
+def _to_torch(batch: dict, sel=None) -> dict:
+    import torch
+
+    return {k: torch.from_numpy(v if sel is None else v[sel]) for k, v in batch.items()}
+
+
+# ---- evaluation ------------------------------------------------------------------
+def predict_segments(pinn, segs: Sequence[D.Segment], norm: D.Normalizer) -> list[np.ndarray]:
+    """Full-sequence Q_red prediction [N*m] per segment (zero initial state, as streaming)."""
+    import torch
+
+    pinn.eval()
+    out = []
+    with torch.no_grad():
+        for s in segs:
+            x = torch.from_numpy(norm.norm_features(s.F).astype(np.float32))[None]
+            y, _ = pinn.net(x)
+            out.append((pinn.q_mean + pinn.q_std * y[0, :, 0]).double().numpy())
+    return out
+
+
+def q_metrics(y_true: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
+    """NRMSE (RMSE / range of the true signal, %), R^2, max abs error [N*m], RMSE [N*m]."""
+    ok = np.isfinite(y_true) & np.isfinite(y_pred)
+    yt, yp = y_true[ok], y_pred[ok]
+    if len(yt) < 2:
+        return {"n": int(len(yt)), "nrmse_pct": float("nan"), "r2": float("nan"), "max_err": float("nan"), "rmse": float("nan")}
+    e = yp - yt
+    rmse = float(np.sqrt(np.mean(e**2)))
+    rng = float(np.ptp(yt))
+    ss = float(np.sum((yt - yt.mean()) ** 2))
+    return {
+        "n": int(len(yt)),
+        "rmse": rmse,
+        "nrmse_pct": 100.0 * rmse / rng if rng > 0 else float("nan"),
+        "r2": 1.0 - float(np.sum(e**2)) / ss if ss > 0 else float("nan"),
+        "max_err": float(np.max(np.abs(e))),
+        "range": rng,
+    }
+
+
+def residual_rms(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, params: ph.TwinParams | None = None) -> dict[str, float]:
+    """RMS of r1..r4 (SI) of the trained twin on full segments (valid interior samples)."""
+    import torch
+
+    pinn.eval()
+    sq = np.zeros(4)
+    cnt = 0
+    with torch.no_grad():
+        for s in segs:
+            b = stack_windows([s], norm, s.n, s.n)
+            tb = _to_torch(b)
+            out, _ = pinn.net(tb["x"])
+            pred = pinn.to_SI(out)
+            from .model import physics_residuals_torch
+
+            p = params or pinn.params
+            if abs(p.N - s.N) > 1e-9:
+                p = p.with_meta(s.N, s.k_t)
+            r = physics_residuals_torch(pred, tb, p, pinn.effects, pinn.extra_terms)
+            m = tb["mask"][:, 1:-1].numpy()
+            R = np.stack([ri.double().numpy() for ri in r])
+            sq += (R[:, m] ** 2).sum(axis=1)
+            cnt += int(m.sum())
+    rms = np.sqrt(sq / max(cnt, 1))
+    return {f"r{j + 1}_rms": float(rms[j]) for j in range(4)} | {"units": "r1, r4 N*m; r2, r3 N"}
+
+
+def physics_baseline(segs: Sequence[D.Segment], params: ph.TwinParams, effects) -> np.ndarray:
+    """Concatenated quasi-static physics-only Q_red prediction on the segments [N*m]."""
+    return np.concatenate(
+        [ph.quasi_static_Q_red(params.with_meta(s.N, s.k_t), effects, s.X[:, 2], s.X[:, 1], s.temperature,
+                               s.theta_m_dd, s.theta_f_dd) for s in segs]
+    )
+
+
+def evaluate(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, residuals: bool = True) -> dict:
+    preds = predict_segments(pinn, segs, norm)
+    yt = np.concatenate([np.where(s.mask, s.Q_red, np.nan) for s in segs])
+    yp = np.concatenate(preds)
+    met = q_metrics(yt, yp)
+    if residuals:
+        met.update(residual_rms(pinn, segs, norm))
+    met["physics_only"] = q_metrics(yt, physics_baseline(segs, pinn.params, pinn.effects))
+    return met
+
+
+# ---- training -------------------------------------------------------------------
+@dataclass
+class TrainResult:
+    model_dir: Path
+    metrics: dict
+    history: dict
+    config: dict
+
+
+def _set_seed(seed: int, threads: int):
+    import random
+
+    import torch
+
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+    torch.set_num_threads(max(1, int(threads)))
+
+
+def build_segments(missions: Sequence, fs_model: float, T_ref: float) -> list[list[D.Segment]]:
+    return [D.preprocess(m, fs_model, T_ref=T_ref) for m in missions]
+
+
+def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
+               split: tuple[Sequence[int], Sequence[int]] | None = None, progress: bool = True,
+               epoch_callback: Callable[[int, dict], None] | None = None) -> TrainResult:
+    """Train a PINN twin on ``missions`` and (if ``out_dir``) write the model directory.
+
+    ``split`` = (train indices, validation indices) into ``missions``; default
+    :func:`hd_twin.data.split_missions` at actuator level with ``cfg.val_frac``.
+    ``epoch_callback(epoch, record)`` may raise to stop (Optuna pruning).
+    """
+    import torch
+
+    from .model import LossConfig, PINN, TwinLSTM
+
+    cfg = copy.deepcopy(cfg).validate()
+    _set_seed(cfg.seed, cfg.threads)
+    if len(missions) < 2:
+        raise ValueError("training needs at least two missions (one for validation)")
+    keys = [(str(m.meta.actuator_id), mission_label(m)) for m in missions]
+    tr_idx, va_idx = split if split is not None else D.split_missions(keys, cfg.val_frac, cfg.seed)
+    if set(tr_idx) & set(va_idx):
+        raise ValueError("training and validation missions overlap")
+    params = resolve_params(cfg, [missions[i] for i in tr_idx])
+    fs_model = fs_model_for([missions[i] for i in tr_idx], cfg.fs_target)
+    t0 = time.perf_counter()
+    segs_by_m = {}
+    for k, i in enumerate(list(tr_idx) + list(va_idx)):
+        if progress:
+            print(f"\rpre-processing {k + 1}/{len(tr_idx) + len(va_idx)}", end="", file=sys.stderr, flush=True)
+        segs_by_m[i] = D.preprocess(missions[i], fs_model, T_ref=params.T_ref)
+    if progress:
+        print(file=sys.stderr)
+    tr_segs = [s for i in tr_idx for s in segs_by_m[i]]
+    va_segs = [s for i in va_idx for s in segs_by_m[i]]
+    if not tr_segs or not va_segs:
+        raise ValueError("no usable segment in the training or the validation missions")
+    norm = D.Normalizer.fit(tr_segs)
+    Wtr = stack_windows(tr_segs, norm, cfg.seq_len, cfg.stride)
+    Wva = stack_windows(va_segs, norm, cfg.seq_len, cfg.seq_len)
+
+    net = TwinLSTM(len(D.FEATURES), len(D.OUTPUTS), cfg.hidden, cfg.layers, cfg.dropout)
+    lcfg = LossConfig(lambda_mode=cfg.lambda_mode, lambda_init=cfg.lambda_init, adaptive_scaling=cfg.adaptive_scaling,
+                      ramp_epochs=cfg.ramp_epochs, washout=cfg.washout)
+    pinn = PINN(net, params, cfg.declared_effects, norm.q_mean, norm.q_std, lcfg, cfg.extra_terms)
+    physics_on = not (cfg.lambda_mode == "fixed" and cfg.lambda_init == 0)
+    opt = torch.optim.Adam([{"params": net.parameters(), "weight_decay": cfg.weight_decay},
+                            {"params": list(pinn.lam.parameters()), "weight_decay": 0.0}], lr=cfg.lr)
+    n_tr = len(Wtr["x"])
+    steps_per_epoch = max(1, math.ceil(n_tr / cfg.batch))
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=cfg.epochs * steps_per_epoch,
+                                                pct_start=0.15, anneal_strategy="cos")
+    rng = np.random.default_rng(cfg.seed)
+    hist: dict[str, list] = {k: [] for k in ("epoch", "train_total", "train_data", "train_physics", "val_total",
+                                             "val_data", "val_physics", "lambda_c", "ramp", "lr", "time_s")}
+    hist["lambda_c_steps"] = []
+    Vt = _to_torch(Wva)
+    for ep in range(cfg.epochs):
+        pinn.train()
+        perm = rng.permutation(n_tr)
+        acc = np.zeros(3)
+        for b in range(steps_per_epoch):
+            sel = perm[b * cfg.batch:(b + 1) * cfg.batch]
+            batch = _to_torch(Wtr, sel)
+            res = pinn.losses(batch, epoch=ep + b / steps_per_epoch, physics=physics_on)
+            opt.zero_grad()
+            res["L_tot"].backward()
+            if cfg.grad_clip > 0:
+                torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.grad_clip)
+            opt.step()
+            sched.step()
+            acc += [float(res["L_tot_report"]), float(res["L_d"]), float(res.get("L_c_ref", 0.0))]
+            hist["lambda_c_steps"].append(float(pinn.lam.value().detach()))
+        acc /= steps_per_epoch
+        pinn.eval()
+        with torch.no_grad():
+            vr = pinn.losses(Vt, epoch=ep, physics=True, update_scaler=False)
+        rec = dict(epoch=ep + 1, train_total=acc[0], train_data=acc[1], train_physics=acc[2],
+                   val_total=float(vr["L_d"] + float(pinn.lam.value().detach()) * vr["L_c_ref"]) if physics_on else float(vr["L_d"]),
+                   val_data=float(vr["L_d"]), val_physics=float(vr["L_c_ref"]), lambda_c=float(pinn.lam.value().detach()),
+                   ramp=float(res["ramp"]), lr=float(sched.get_last_lr()[0]), time_s=time.perf_counter() - t0)
+        for k, v in rec.items():
+            hist[k].append(v)
+        if progress:
+            print(f"epoch {ep + 1:3d}/{cfg.epochs}  L_tot {acc[0]:.4g}  L_d {acc[1]:.4g}  L_c {acc[2]:.4g}  "
+                  f"val L_d {rec['val_data']:.4g}  lambda_c {rec['lambda_c']:.4g}  {rec['time_s']:.0f}s",
+                  file=sys.stderr, flush=True)
+        if not all(math.isfinite(rec[k]) for k in ("train_total", "val_data")):
+            raise FloatingPointError(f"training diverged at epoch {ep + 1} (non-finite loss); lower the learning rate")
+        if epoch_callback is not None:
+            epoch_callback(ep, rec)
+    train_time = time.perf_counter() - t0
+
+    metrics = {
+        "validation": evaluate(pinn, va_segs, norm),
+        "training": evaluate(pinn, tr_segs, norm, residuals=False),
+        "train_time_s": train_time,
+        "n_train_missions": len(tr_idx),
+        "n_val_missions": len(va_idx),
+        "n_train_samples": int(sum(s.n for s in tr_segs)),
+        "n_val_samples": int(sum(s.n for s in va_segs)),
+        "lambda_c_final": float(pinn.lam.value().detach()),
+        "torch_threads": torch.get_num_threads(),
+        "nrmse_definition": "RMSE / (max - min) of the measured Q_red over the set, in %",
+    }
+    config = {
+        "format": MODEL_FORMAT,
+        "model_version": cfg.model_version,
+        "parent": cfg.parent,
+        "inputs": list(D.RAW_INPUTS),
+        "features": list(D.FEATURES),
+        "outputs": list(D.OUTPUTS),
+        "output_scales": {k: list(v) for k, v in pinn.output_scales().items()},
+        "declared_effects": list(cfg.declared_effects),
+        "extra_terms": list(cfg.extra_terms),
+        "params": params.to_dict(),
+        "preprocessing": {"fs_model": fs_model, "antialias": "causal Butterworth order 4, 0.8 x new Nyquist (when decimating)",
+                          "differentiation": "per segment: zero-phase Butterworth(2) at 0.25 fs + 2nd-order central differences",
+                          "temperature_frame": "gearbox (motor_winding fallback)"},
+        "normalization": norm.to_dict(),
+        "arch": {"type": "lstm", "layers": cfg.layers, "hidden": cfg.hidden, "dropout": cfg.dropout, "bidirectional": False},
+        "train": dataclasses.asdict(cfg),
+        "data": {
+            "train": [{"bag": mission_label(missions[i]), "actuator_id": str(missions[i].meta.actuator_id),
+                       "sha256": mission_hash(missions[i])} for i in tr_idx],
+            "validation": [{"bag": mission_label(missions[i]), "actuator_id": str(missions[i].meta.actuator_id),
+                            "sha256": mission_hash(missions[i])} for i in va_idx],
+        },
+        "torch_version": torch.__version__,
+    }
+    result = TrainResult(Path(out_dir) if out_dir else None, metrics, hist, config)
+    result.pinn, result.norm, result.segments = pinn, norm, (tr_segs, va_segs)
+    if out_dir is not None:
+        save_model(result, cfg, progress=progress)
+    return result
+
+
+def save_model(result: TrainResult, cfg: TrainConfig, progress: bool = True) -> None:
+    import torch
+
+    out = Path(result.model_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.save(result.pinn.state_dict(), out / "model.pt")
+    (out / "config.json").write_text(json.dumps(result.config, indent=2))
+    (out / "history.json").write_text(json.dumps(result.history))
+    if cfg.export_onnx:
+        from .export import export_onnx
+
+        export_onnx(out)
+    (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2))
+    if cfg.plots:
+        from .plots import plot_training
+
+        tr, va = result.segments
+        plot_training(out, result.pinn, result.norm, tr, va, result.history)
+    if progress:
+        print(f"model written to {out}", file=sys.stderr)
+
+
+def load_pinn(model_dir: str | Path):
+    """(PINN in eval mode, Normalizer, config dict) from a model directory."""
+    import torch
+
+    from .model import LossConfig, PINN, TwinLSTM
+
+    model_dir = Path(model_dir)
+    try:
+        cfgd = json.loads((model_dir / "config.json").read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{model_dir}: not a twin model directory (no config.json)") from None
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{model_dir / 'config.json'}: corrupt JSON ({e})") from None
+    if cfgd.get("format") != MODEL_FORMAT:
+        raise ValueError(f"{model_dir}: model format {cfgd.get('format')!r}, expected {MODEL_FORMAT!r}")
+    a, t = cfgd["arch"], cfgd["train"]
+    params = ph.TwinParams.from_dict(cfgd["params"], f"{model_dir}/config.json params")
+    norm = D.Normalizer.from_dict(cfgd["normalization"])
+    net = TwinLSTM(len(cfgd["features"]), len(cfgd["outputs"]), a["hidden"], a["layers"], a["dropout"])
+    lcfg = LossConfig(lambda_mode=t["lambda_mode"], lambda_init=t["lambda_init"], adaptive_scaling=t["adaptive_scaling"],
+                      ramp_epochs=t["ramp_epochs"], washout=t["washout"])
+    pinn = PINN(net, params, cfgd["declared_effects"], norm.q_mean, norm.q_std, lcfg, cfgd.get("extra_terms", []))
+    pinn.load_state_dict(torch.load(model_dir / "model.pt", weights_only=True))
+    pinn.eval()
+    return pinn, norm, cfgd
+
+
+def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
+    """Metrics of a trained model on other missions (N, k_t from each bag's metadata)."""
+    pinn, norm, cfgd = load_pinn(model_dir)
+    fs_model = cfgd["preprocessing"]["fs_model"]
+    segs = [s for m in missions for s in D.preprocess(m, fs_model, T_ref=pinn.params.T_ref)]
+    if not segs:
+        raise ValueError("no usable segment in the given missions")
+    met = evaluate(pinn, segs, norm)
+    met["n_missions"] = len(missions)
+    return met
