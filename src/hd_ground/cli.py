@@ -1,0 +1,76 @@
+"""Ground-segment sub-commands: ``hdphm discover`` (residual -> missing effect -> augmented twin)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "discover",
+        help="find effects the twin lacks in recorded bags, add them, report error before/after",
+        description=(
+            "Fit (or load with --twin) the twin's model of the measured motor torque (and of Q_red where a "
+            "twist is measured), analyse the residual (order spectra vs theta_m/theta_f, speed, temperature, "
+            "load), select missing effects from the PHYSICS.md catalog plus generic order terms by "
+            "block cross-validation, and write OUT/report.json, plots and OUT/twin (the new model version)."
+        ),
+    )
+    p.add_argument("bags", nargs="+", help="contract bags (.mcap) or directories of bags")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--twin", default=None, metavar="MODEL_DIR", help="twin model dir (config.json) to start from")
+    p.add_argument("--signal", action="append", choices=["tau_m", "Q_red"],
+                   help="target signal(s); default tau_m and, where measured, Q_red")
+    p.add_argument("--heldout", action="append", metavar="BAG",
+                   help="bag (path or substring) held out whole; default: the last bag if several, "
+                        "else the last --heldout-frac of each bag's time")
+    p.add_argument("--fit-files", action="append", metavar="BAG",
+                   help="bags to fit on (substring match); every other bag is held out")
+    p.add_argument("--heldout-frac", type=float, default=0.3, help="time fraction held out per bag (single-bag mode)")
+    p.add_argument("--blocks", type=int, default=5, help="time blocks per bag (CV folds)")
+    p.add_argument("--angle-offset", choices=["none", "estimate"], default="none",
+                   help="estimate an unknown per-bag theta_m offset on the first --calib-frac of each held-out bag "
+                        "(scored on the rest); for logs whose rotor angle has no absolute zero")
+    p.add_argument("--calib-frac", type=float, default=0.2)
+    p.add_argument("--min-gain", type=float, default=0.02,
+                   help="minimum relative drop of the cross-validated error for adding an effect")
+    p.add_argument("--max-effects", type=int, default=6)
+    p.add_argument("--retrain", action="store_true", help="retrain the twin network with the new terms (needs --twin)")
+    p.add_argument("--no-plots", action="store_true")
+    p.set_defaults(func=_discover)
+
+
+def _discover(args: argparse.Namespace) -> int:
+    from hd_ground.discovery.core import Options
+    from hd_ground.discovery.data import DiscoveryError
+    from hd_ground.discovery.pipeline import expand_paths, run_discovery
+
+    for name, v, lo, hi in (("--heldout-frac", args.heldout_frac, 0.05, 0.9), ("--calib-frac", args.calib_frac, 0.01, 0.9),
+                            ("--min-gain", args.min_gain, 0.0, 0.9)):
+        if not lo <= v <= hi:
+            print(f"hdphm discover: {name}={v} is outside [{lo}, {hi}]", file=sys.stderr)
+            return 2
+    if args.blocks < 2 or args.max_effects < 0:
+        print("hdphm discover: --blocks must be >= 2 and --max-effects >= 0", file=sys.stderr)
+        return 2
+    opt = Options(min_gain=args.min_gain, max_effects=args.max_effects, angle_offset=args.angle_offset,
+                  calib_frac=args.calib_frac)
+    try:
+        heldout = args.heldout
+        if args.fit_files:
+            paths = [str(p) for p in expand_paths(args.bags)]
+            fit = [p for p in paths if any(f in p for f in args.fit_files)]
+            if not fit:
+                raise DiscoveryError(f"--fit-files {args.fit_files} match none of {paths}")
+            heldout = (heldout or []) + [p for p in paths if p not in fit]
+        rep = run_discovery(args.bags, args.out, twin_dir=args.twin, signals=args.signal, heldout=heldout,
+                            heldout_frac=args.heldout_frac, blocks_per_bag=args.blocks, opt=opt,
+                            plots=not args.no_plots, retrain=args.retrain,
+                            log=lambda s: print(s, flush=True))
+    except (DiscoveryError, ValueError, OSError) as e:
+        print(f"hdphm discover: {e}", file=sys.stderr)
+        return 1
+    n = len(rep.get("effects", []))
+    print(f"{n} effect(s) found; report in {args.out}/report.json")
+    return 0

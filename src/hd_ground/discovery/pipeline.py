@@ -1,0 +1,287 @@
+"""``hdphm discover``: bags (+ optional twin model dir) -> report.json, plots, new twin version.
+
+Thin I/O around :mod:`hd_ground.discovery.core`. Reads contract bags with
+``hd_bag.read_mission`` (never ``/sim``), runs discovery per target signal,
+writes ``OUT/report.json`` (schema in this package's README.md), PNG plots
+and ``OUT/twin/config.json``: the new model version with the found effects
+declared and their terms in ``extra_terms``.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout
+from .data import Dataset, DiscoveryError, dataset_from_missions
+
+#: Twin declared effects that are model structure, not candidate effects of a target signal.
+STRUCTURAL = {"inertia", "linear_stiffness", "structural_damping", "mesh_friction"}
+REPORT_FORMAT = "hdphm-discovery/1"
+
+
+def load_twin(model_dir: str | Path) -> dict:
+    """The twin's config.json as a dict (declared_effects, params, extra_terms, model_version)."""
+    p = Path(model_dir) / "config.json"
+    try:
+        cfg = json.loads(p.read_text())
+    except FileNotFoundError:
+        raise DiscoveryError(f"{model_dir}: not a twin model directory (no config.json)") from None
+    except json.JSONDecodeError as e:
+        raise DiscoveryError(f"{p}: corrupt JSON ({e})") from None
+    if not isinstance(cfg.get("declared_effects", []), list):
+        raise DiscoveryError(f"{p}: declared_effects must be a list")
+    from hd_twin.terms import validate_term
+
+    for i, t in enumerate(cfg.get("extra_terms", []) or []):
+        try:
+            validate_term(t, f"{p} extra_terms[{i}]")
+        except ValueError as e:
+            raise DiscoveryError(str(e)) from None
+    return cfg
+
+
+def expand_paths(paths: list[str]) -> list[Path]:
+    """Bag files from files and directories (``*.mcap``, sorted); errors name the path."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(p.rglob("*.mcap"))
+            if not found:
+                raise DiscoveryError(f"{p}: directory holds no .mcap bag")
+            out += found
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise DiscoveryError(f"{p}: no such bag file or directory")
+    return out
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if np.isfinite(v) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    return x
+
+
+def run_discovery(
+    bags: list[str],
+    out_dir: str | Path,
+    *,
+    twin_dir: str | None = None,
+    signals: list[str] | None = None,
+    heldout: list[str] | None = None,
+    heldout_frac: float = 0.3,
+    blocks_per_bag: int = 5,
+    within_bag_check: bool = True,
+    opt: Options | None = None,
+    plots: bool = True,
+    retrain: bool = False,
+    log=print,
+    missions=None,
+) -> dict:
+    """Run discovery on ``bags`` and write OUT_DIR; returns the report dict.
+
+    ``heldout``: bag names/paths (or substrings) held out whole; default: the
+    last bag when there are several, else the last ``heldout_frac`` of time of
+    each bag. ``missions`` (already read, same order as ``bags``) skips reading.
+    """
+    opt = opt or Options()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if missions is None:
+        from hd_bag import read_mission
+
+        paths = expand_paths(bags)
+        missions = []
+        for p in paths:
+            log(f"reading {p}")
+            missions.append(read_mission(str(p)))
+        names = [str(p) for p in paths]
+    else:
+        names = [str(b) for b in bags]
+    ds = dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag)
+    for n_ in ds.notes:
+        log(f"note: {n_}")
+
+    twin = load_twin(twin_dir) if twin_dir else None
+    declared_all = list(twin.get("declared_effects", [])) if twin else None
+    extra = list(twin.get("extra_terms", []) or []) if twin else []
+    tparams = dict(twin.get("params", {}) or {}) if twin else {}
+    if "stribeck_delta" in tparams:
+        tparams.setdefault("delta", tparams["stribeck_delta"])
+
+    ho_bags: list[int] = []
+    if heldout:
+        for h in heldout:
+            hit = [i for i, n_ in enumerate(names) if h == n_ or h in n_]
+            if not hit:
+                raise DiscoveryError(f"--heldout {h!r} matches none of the bags {names}")
+            ho_bags += hit
+    elif len(names) > 1:
+        ho_bags = [len(names) - 1]
+    ho_bags = sorted(set(ho_bags))
+    if ho_bags and len(ho_bags) == len(names):
+        raise DiscoveryError("every bag is held out; leave at least one bag to fit on")
+    ho = split_fit_heldout(ds, ho_bags, heldout_frac)
+    split = ({"mode": "bags", "heldout": [names[i] for i in ho_bags]} if ho_bags
+             else {"mode": "time_blocks", "heldout_frac": heldout_frac, "blocks_per_bag": blocks_per_bag})
+
+    targets = signals or ["tau_m"] + (["Q_red"] if "Q_red" in ds.signals else [])
+    results: list[SignalResult] = []
+    for target in targets:
+        if target not in ds.signals:
+            log(f"{target}: not measured in these bags; skipped")
+            continue
+        decl = None if declared_all is None else [e for e in declared_all if e not in STRUCTURAL and _applies(e, target)]
+        if decl is None:
+            decl = list(DEFAULT_DECLARED[target])
+        log(f"{target}: discovering (declared: {decl or 'none'}) ...")
+        res = discover_signal(ds, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
+        results.append(res)
+        _log_result(res, log)
+
+    within = {}
+    if within_bag_check and ho_bags:
+        # second, independent run: fit bags only, last time blocks of each held out
+        fit_only = ds.subset(~np.isin(ds.bag, ho_bags))
+        ho2 = split_fit_heldout(fit_only, None, heldout_frac)
+        for target in [r.signal for r in results if r.identifiable]:
+            decl = [r.declared_before for r in results if r.signal == target][0]
+            o2 = Options(**{**asdict(opt), "angle_offset": "none"})
+            r2 = discover_signal(fit_only, target, ho2, declared=decl, extra_terms=extra, twin_params=tparams, opt=o2)
+            within[target] = {"error_before": r2.error_before, "error_after": r2.error_after,
+                              "effects": [_effect_brief(e) for e in r2.effects], "heldout_frac": heldout_frac}
+
+    report = build_report(results, split, ds, within, twin_dir, opt)
+    new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log)
+    report["twin_out"] = str(new_dir) if new_dir else None
+    if plots and results:
+        from .plots import plot_result
+
+        for r in results:
+            if r.identifiable:
+                report.setdefault("plots", []).extend(plot_result(r, out, ds))
+    (out / "report.json").write_text(json.dumps(_jsonable(report), indent=2))
+    log(f"report: {out / 'report.json'}")
+    return report
+
+
+def _applies(effect: str, target: str) -> bool:
+    q_only = {"kinematic_error_harmonic", "position_dependent_stiffness", "nonlinear_stiffness", "hysteresis", "backlash"}
+    return (effect in q_only) == (target == "Q_red")
+
+
+def _effect_brief(e: dict) -> dict:
+    return {k: e[k] for k in ("name", "variable", "order", "explained")}
+
+
+def _log_result(r: SignalResult, log) -> None:
+    for s in r.statements:
+        log(f"  {r.signal}: {s}")
+    if not r.identifiable:
+        return
+    for e in r.effects:
+        ps = ", ".join(f"{k}={v:.4g}" for k, v in e["parameters"].items())
+        log(f"  found {e['name']} ({e['variable']}, order {e['order']}): {e['form']}; {ps}; "
+            f"explains {e['explained']:.1%} of held-out residual variance")
+    log(f"  held-out {r.signal} RMSE {r.error_before['rmse']:.4g} -> {r.error_after['rmse']:.4g} N*m "
+        f"(NRMSE {r.error_before['nrmse']:.3g} -> {r.error_after['nrmse']:.3g})")
+
+
+def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: dict, twin_dir, opt: Options) -> dict:
+    per = []
+    for r in results:
+        per.append({
+            "signal": r.signal, "identifiable": r.identifiable, "statements": r.statements,
+            "error_before": r.error_before, "error_after": r.error_after, "effects": r.effects,
+            "declared_before": r.declared_before, "declared_after": r.declared_after,
+            "baseline_parameters": r.baseline_params, "refit_baseline_parameters": r.refit_baseline_params,
+            "terms": r.terms, "angle_offsets": r.offsets, "comparisons": r.comparisons,
+            "selection_trace": r.cv_trace,
+            "order_spectra": [{"variable": s.variable, "modulator": s.modulator, "peaks": s.peaks,
+                               "floor": s.floor, "revolutions": s.revolutions} for s in r.spectra],
+            "within_bag": within.get(r.signal),
+        })
+    primary = next((p for p in per if p["identifiable"] and p["effects"]), None) or \
+        next((p for p in per if p["identifiable"]), None) or (per[0] if per else None)
+    rep = {"format": REPORT_FORMAT, "bags": ds.bag_names, "split": split, "twin_in": twin_dir,
+           "options": asdict(opt), "signals": per}
+    if primary:
+        for k in ("signal", "error_before", "error_after", "effects", "declared_before", "declared_after",
+                  "identifiable", "statements"):
+            rep[k] = primary[k]
+        # all signals' effects, best first, in the top-level list
+        rep["effects"] = sorted([e for p in per for e in p["effects"]], key=lambda e: -e["explained"])
+        rep["declared_after"] = list(dict.fromkeys(sum((p["declared_after"] for p in per), [])))
+        rep["declared_before"] = list(dict.fromkeys(sum((p["declared_before"] for p in per), [])))
+    return rep
+
+
+def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
+                       retrain: bool, missions, log) -> Path | None:
+    """Write the augmented model version (only when something was found)."""
+    new_terms = [t for r in results for t in r.terms]
+    if not new_terms:
+        log("twin unchanged (no effect found)")
+        return None
+    if dst.exists():
+        shutil.rmtree(dst)
+    if twin is not None:
+        shutil.copytree(twin_dir, dst)
+        cfg = json.loads(json.dumps(twin))
+    else:
+        dst.mkdir(parents=True)
+        cfg = {"format": "hd_twin/physics-only", "model_version": 0, "declared_effects": ["inertia"] +
+               DEFAULT_DECLARED["tau_m"], "extra_terms": [], "params": {}}
+    parent_version = cfg.get("model_version", 0)
+    cfg["parent"] = {"dir": twin_dir, "model_version": parent_version}
+    cfg["model_version"] = (parent_version + 1) if isinstance(parent_version, int) else f"{parent_version}+1"
+    decl = list(cfg.get("declared_effects", []))
+    for r in results:
+        for e in r.declared_after:
+            if e not in decl:
+                decl.append(e)
+    cfg["declared_effects"] = decl
+    cfg["extra_terms"] = list(cfg.get("extra_terms", []) or []) + new_terms
+    params = dict(cfg.get("params", {}) or {})
+    for r in results:
+        if r.signal == "tau_m" and r.identifiable:
+            rp = r.refit_baseline_params
+            if "T_C" in rp and rp["T_C"] >= 0:
+                params["T_C"] = rp["T_C"]
+            if "b" in rp and rp["b"] >= 0:
+                params["b_visc"] = rp["b"]
+    cfg["params"] = params
+    cfg["discovery"] = {"recalibrated": [k for k in ("T_C", "b_visc") if k in params],
+                        "baseline_refit": {r.signal: r.refit_baseline_params for r in results},
+                        "network": "copied from the parent version, not retrained" if twin is not None else "none (physics-only model)"}
+    if retrain and twin is not None and "train" in cfg:
+        try:
+            from hd_twin.train import TrainConfig, train_twin
+
+            tc = dict(cfg["train"])
+            tc.update(declared_effects=decl, extra_terms=cfg["extra_terms"], model_version=cfg["model_version"],
+                      parent=str(twin_dir))
+            fields = TrainConfig.__dataclass_fields__
+            log("retraining the twin with the new effects (hd_twin.train.train_twin) ...")
+            train_twin(missions, dst, TrainConfig(**{k: v for k, v in tc.items() if k in fields}))
+            cfg2 = json.loads((dst / "config.json").read_text())
+            cfg2["discovery"] = dict(cfg["discovery"], network="retrained with the new physics terms")
+            (dst / "config.json").write_text(json.dumps(_jsonable(cfg2), indent=2))
+            return dst
+        except Exception as e:  # noqa: BLE001 - report, keep the recalibrated version
+            log(f"retraining failed ({type(e).__name__}: {e}); writing the recalibrated physics only")
+    (dst / "config.json").write_text(json.dumps(_jsonable(cfg), indent=2))
+    log(f"new twin version {cfg['model_version']} written to {dst}")
+    return dst
