@@ -1,0 +1,105 @@
+"""Adaptive per-actuator thresholds from healthy-mission residual statistics (pure numpy).
+
+For one residual channel of one actuator, given the residuals of missions
+known (or assumed) healthy:
+
+* ``mu`` = median, ``sigma`` = 1.4826 MAD (robust: a few transients do not
+  inflate the scale), both in the channel's unit;
+* the EWMA ``e`` of the normalised residual is run exactly as onboard
+  (:func:`hd_onboard.detector.ewma`, same time constant), and its
+  *persistent peak* is taken: the largest value that |e| held for the
+  onboard persistence time (a sliding minimum over P samples, then the max);
+* ``h_warn = max(min_h_warn, warn_margin * peak)``,
+  ``h_error = max(min_h_error, error_margin * peak, 1.5 h_warn)``.
+
+So on the calibration data itself no flag would rise (the lines sit a margin
+above the healthy peak), and the margin is what the false-alarm rate on
+*other* healthy missions measures (``tests/ros``, ``hdphm`` reports).
+The onboard core uses the same function on a mission's warm-up when the
+ground has not calibrated that actuator yet.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from hd_onboard.detector import ChannelThreshold, ewma
+
+MIN_SAMPLES = 200
+
+
+def persistent_peak(a: np.ndarray, p: int) -> float:
+    """max over k of min(a[k:k+p]) (NaN ignored: they break the run)."""
+    a = np.where(np.isfinite(a), a, -np.inf)
+    if len(a) == 0:
+        return 0.0
+    p = max(1, min(int(p), len(a)))
+    if p == 1:
+        v = float(np.max(a))
+    else:
+        v = float(np.lib.stride_tricks.sliding_window_view(a, p).min(axis=1).max())
+    return v if np.isfinite(v) else 0.0
+
+
+def channel_threshold(segments: Iterable[np.ndarray], *, fs: float, ewma_tau_s: float = 0.1,
+                      persistence_s: float = 0.05, warn_margin: float = 1.5, error_margin: float = 3.0,
+                      min_h_warn: float = 3.0, min_h_error: float = 6.0,
+                      source: str = "ground (healthy missions)") -> ChannelThreshold | None:
+    """Thresholds of one channel from residual ``segments`` (each a 1-D array, NaN allowed).
+
+    ``fs`` [Hz] sample rate of the residuals; returns None when fewer than
+    ``MIN_SAMPLES`` finite residuals are available (the caller keeps its
+    previous lines).
+    """
+    segs = [np.asarray(s, dtype=float) for s in segments]
+    allr = np.concatenate(segs) if segs else np.empty(0)
+    fin = allr[np.isfinite(allr)]
+    if len(fin) < MIN_SAMPLES:
+        return None
+    if not (np.isfinite(fs) and fs > 0):
+        raise ValueError(f"thresholds: sample rate {fs!r} Hz is not positive")
+    mu = float(np.median(fin))
+    sigma = float(1.4826 * np.median(np.abs(fin - mu)))
+    if not sigma > 0:
+        sigma = float(np.std(fin)) or 1e-12
+    lam = min(1.0, 1.0 / (ewma_tau_s * fs))
+    p = max(1, int(round(persistence_s * fs)))
+    peak = 0.0
+    for s in segs:
+        if np.isfinite(s).sum() < 2:
+            continue
+        e = ewma((s - mu) / sigma, lam, 0.0)
+        e = np.where(np.isfinite(s), np.abs(e), np.nan)
+        # skip the EWMA start-up (one time constant): it starts from 0, not from the data
+        e[: int(ewma_tau_s * fs)] = np.nan
+        peak = max(peak, persistent_peak(e, p))
+    h_warn = max(min_h_warn, warn_margin * peak)
+    h_error = max(min_h_error, error_margin * peak, 1.5 * h_warn)
+    return ChannelThreshold(mu, sigma, float(h_warn), float(h_error), source).validate("thresholds")
+
+
+def actuator_thresholds(results: Sequence[dict], *, channels: Sequence[str] = ("Q_red", "twist"),
+                        fs: float | None = None, **kw) -> dict[str, ChannelThreshold]:
+    """Per-channel thresholds of one actuator from batch onboard results (:func:`hd_onboard.core.run_mission`).
+
+    Each result's residual table gives one segment per channel (columns
+    ``r_Q_red`` and ``r_twist``); ``fs`` defaults to the median stamp rate.
+    """
+    from hd_onboard.core import RESIDUAL_COLUMNS
+
+    col = {"Q_red": RESIDUAL_COLUMNS.index("r_Q_red"), "twist": RESIDUAL_COLUMNS.index("r_twist")}
+    out: dict[str, ChannelThreshold] = {}
+    if fs is None:
+        rates = []
+        for r in results:
+            st = r["table"][:, 0]
+            if len(st) > 2:
+                rates.append(1.0 / float(np.median(np.diff(st))))
+        fs = float(np.median(rates)) if rates else 1000.0
+    for c in channels:
+        th = channel_threshold([r["table"][:, col[c]] for r in results], fs=fs, **kw)
+        if th is not None:
+            out[c] = th
+    return out

@@ -1,0 +1,482 @@
+"""The onboard (real-time) core: conditioning -> expected response -> residuals -> flags -> windows.
+
+Pure numpy, streaming, one actuator: the onboard node feeds it the blocks of
+samples it takes from its subscriptions, :func:`run_mission` feeds it a whole
+:class:`hd_bag.mission.Mission` in blocks (batch, tests, benchmarks, the
+ground's threshold calibration): both produce the same numbers.
+
+Signal conditioning (:meth:`OnboardCore.push`):
+
+* stamps at or before the last accepted stamp (duplicates, late arrivals)
+  are dropped and counted: a real-time monitor cannot wait to re-sort;
+* a stamp step longer than ``max_gap_samples`` nominal periods is a dropout:
+  the twin's state is reset (new segment) and the first ``settle_s`` seconds
+  after it are not evaluated (filter / LSTM transient);
+* NaN samples are held for the twin input and excluded from evaluation; a
+  NaN run longer than ``max_gap_samples`` is treated like a dropout.
+
+Residual channels (measured - expected):
+
+* ``Q_red`` [N*m]: measured reducer output torque minus the twin's expected
+  one (NaN where the bag does not measure Q_red);
+* ``twist`` [rad]: transmission deflection not explained by the elastic
+  law, ``(theta_f - theta_m/N) - Q/K_out`` (Q = measured Q_red, else the
+  expected one), minus its value over the mission's first ``warmup_s``
+  (encoder zero offsets). Lost motion, backlash and kinematic-error growth
+  show here.
+
+Each channel is normalised and tested by :mod:`hd_onboard.detector`. Every
+``window_s`` of sample time the core closes a window: residual statistics
+per channel and, when available, the prognostic features of
+``hd_onboard.features``; these rows go to the prognostic node.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hd_onboard.detector import ERROR, OK, WARN, ChannelDetector, ChannelThreshold, LevelLatch
+from hd_onboard.expected import I_REF, I_TEMP, PhysicsStandInExpected
+from hd_twin import physics as ph
+
+JS_COLS = ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red")
+CHANNELS = ("Q_red", "twist")
+#: columns of the residual table published on /hd/onboard/residuals
+RESIDUAL_COLUMNS = ("stamp", "Q_red", "Q_red_hat", "r_Q_red", "e_Q_red", "r_twist", "e_twist", "level")
+#: residual statistics per window and channel
+STAT_NAMES = ("mean", "std", "rms", "max_abs_e", "frac_warn", "n_valid")
+
+
+@dataclass
+class OnboardConfig:
+    """Onboard parameters (SI). Every one is a ROS parameter of the onboard node."""
+
+    window_s: float = 1.0  # s, feature / residual-statistics window
+    ewma_tau_s: float = 0.1  # s, EWMA time constant of the normalised residual
+    persistence_s: float = 0.05  # s, the condition must hold this long before a flag rises
+    hold_s: float = 2.0  # s, a raised flag is held at least this long
+    warmup_s: float = 5.0  # s, twist zero and, without ground thresholds, self-calibration
+    settle_s: float = 0.05  # s, not evaluated after a reset (filter / LSTM transient)
+    max_gap_samples: int = 10  # dropout longer than this -> new segment
+    nominal_fs: float = 0.0  # Hz; 0: estimated from the first stamps
+    accel_cutoff_hz: float = 50.0  # Hz, stand-in derivative filter
+    default_h_warn: float = 3.0  # sigma units, self-calibrated lines = max(default, margin * healthy peak)
+    default_h_error: float = 6.0
+    warn_margin: float = 1.5
+    error_margin: float = 3.0
+
+    def validate(self) -> "OnboardConfig":
+        for k in ("window_s", "ewma_tau_s", "persistence_s", "hold_s", "warmup_s", "default_h_warn",
+                  "default_h_error", "warn_margin", "error_margin", "accel_cutoff_hz"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"onboard parameter {k} = {v!r} must be a positive finite number")
+        if not (0 <= self.settle_s < 60 and 1 <= int(self.max_gap_samples) <= 10**6):
+            raise ValueError(f"onboard parameters settle_s={self.settle_s}, max_gap_samples={self.max_gap_samples} are absurd")
+        if self.window_s > 3600 or self.ewma_tau_s > 3600:
+            raise ValueError("onboard window_s / ewma_tau_s above one hour are absurd")
+        if not (self.nominal_fs == 0 or 10 <= self.nominal_fs <= 1e5):
+            raise ValueError(f"onboard parameter nominal_fs = {self.nominal_fs} Hz outside 10..1e5 (0 = estimate)")
+        return self
+
+
+@dataclass
+class InputHealth:
+    """What conditioning did, for /diagnostics."""
+
+    n_samples: int = 0
+    n_dropped_order: int = 0  # duplicates / out-of-order stamps dropped
+    n_nan: int = 0
+    n_gaps: int = 0
+    n_missing: int = 0  # samples missing in gaps
+    n_resets: int = 0
+
+
+@dataclass
+class PushResult:
+    table: np.ndarray  # (n, len(RESIDUAL_COLUMNS)), rows of accepted samples
+    level: int  # level after the block
+    events: list[tuple[int, int, str]] = field(default_factory=list)  # (stamp_ns, new level, reason) on rises
+    windows: list[dict[str, Any]] = field(default_factory=list)
+
+
+class OnboardCore:
+    """Streaming residual / threshold / flag core for one actuator (see module docstring)."""
+
+    def __init__(self, expected=None, params: ph.TwinParams | None = None, gear_ratio: float | None = None,
+                 thresholds: dict[str, ChannelThreshold] | None = None, config: OnboardConfig | None = None,
+                 feature_fn=None):
+        self.cfg = (config or OnboardConfig()).validate()
+        self.params = (params or ph.TwinParams.from_yaml())
+        if gear_ratio is not None:
+            self.params = self.params.with_meta(gear_ratio=gear_ratio)
+        fs = self.cfg.nominal_fs or 1000.0
+        self.expected = expected or PhysicsStandInExpected(self.params, fs_hz=fs, accel_cutoff_hz=self.cfg.accel_cutoff_hz)
+        self.feature_fn = feature_fn
+        self._given_thresholds = dict(thresholds or {})
+        self.reset_mission()
+
+    # ---- configuration -----------------------------------------------------
+    def set_thresholds(self, thresholds: dict[str, ChannelThreshold]) -> None:
+        """New per-channel thresholds (ground adaptation); the EWMA state is kept."""
+        self._given_thresholds = dict(thresholds)
+        for c, th in thresholds.items():
+            if c in self.detectors:
+                self.detectors[c].threshold = th
+        self.calibrated = all(c in self._given_thresholds for c in CHANNELS)
+
+    def set_params(self, params: ph.TwinParams) -> None:
+        self.params = params.with_meta(gear_ratio=self.params.N)
+        if hasattr(self.expected, "set_params"):
+            self.expected.set_params(self.params)
+
+    @property
+    def thresholds(self) -> dict[str, ChannelThreshold]:
+        return {c: d.threshold for c, d in self.detectors.items()}
+
+    # ---- state -------------------------------------------------------------
+    def reset_mission(self) -> None:
+        """Forget everything of the current mission (a new mission starts)."""
+        cfg = self.cfg
+        self.fs = cfg.nominal_fs or None
+        self._t0_ns: int | None = None
+        self.last_ns: int | None = None
+        self.last_valid_ns: int | None = None
+        self._stamp_buf: list[int] = []
+        self.health = InputHealth()
+        self.temperature = math.nan
+        self.theta_ref = math.nan
+        self.expected.reset()
+        self._settle_until = -math.inf
+        self._nan_run = 0
+        self._hold = np.full(6, np.nan)
+        self.calibrated = all(c in self._given_thresholds for c in CHANNELS)
+        default = ChannelThreshold(0.0, 1.0, cfg.default_h_warn, cfg.default_h_error, "uncalibrated")
+        self.detectors: dict[str, ChannelDetector] = {}
+        for c in CHANNELS:
+            self.detectors[c] = ChannelDetector(c, self._given_thresholds.get(c, default), 1.0, 1)
+        self._configure_rates()
+        self.latch = LevelLatch(cfg.hold_s)
+        self.level = OK
+        self.onset_ns: int | None = None
+        self._warm: dict[str, list[np.ndarray]] = {c: [] for c in CHANNELS}
+        self._twist_zero: float | None = None
+        self._twist_warm: list[np.ndarray] = []
+        self._win_index: int | None = None
+        self._win: list[np.ndarray] = []
+        self._win_raw: list[np.ndarray] = []
+        self.windows_emitted = 0
+
+    def _configure_rates(self) -> None:
+        fs = self.fs or 1000.0
+        lam = min(1.0, 1.0 / (self.cfg.ewma_tau_s * fs))
+        pers = max(1, int(round(self.cfg.persistence_s * fs)))
+        for d in self.detectors.values():
+            d.lam, d.persistence = lam, pers
+
+    def push_temperature(self, stamp_ns: int, value: float) -> None:
+        """A temperature sample [degC] (the gearbox frame is preferred by the caller)."""
+        if math.isfinite(value) and -100.0 < value < 400.0:
+            self.temperature = float(value)
+
+    def push_command(self, stamp_ns: int, theta_ref: float) -> None:
+        self.theta_ref = float(theta_ref)
+
+    # ---- the hot path ------------------------------------------------------
+    def push(self, stamps_ns: np.ndarray, V: np.ndarray) -> PushResult:
+        """Process a block of joint-state samples.
+
+        ``stamps_ns`` int64 (n,), ``V`` float (n, 6) with columns :data:`JS_COLS`
+        (SI). Returns the residual table of the accepted samples, the level
+        after the block, rising-edge events and the windows closed by the block.
+        """
+        cfg = self.cfg
+        stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+        V = np.asarray(V, dtype=np.float64)
+        if V.ndim != 2 or V.shape[1] != 6 or len(V) != len(stamps_ns):
+            raise ValueError(f"onboard core: expected stamps (n,) and samples (n, 6), got {stamps_ns.shape} and {V.shape}")
+        n_in = len(stamps_ns)
+        self.health.n_samples += n_in
+        if n_in == 0:
+            return PushResult(np.empty((0, len(RESIDUAL_COLUMNS))), self.level)
+        # 1. order: drop stamps not after everything accepted before
+        prev = np.maximum.accumulate(np.concatenate([[self.last_ns if self.last_ns is not None else np.iinfo(np.int64).min], stamps_ns[:-1]]))
+        keep = stamps_ns > prev
+        if not keep.all():
+            self.health.n_dropped_order += int((~keep).sum())
+            stamps_ns, V = stamps_ns[keep], V[keep]
+        n = len(stamps_ns)
+        if n == 0:
+            return PushResult(np.empty((0, len(RESIDUAL_COLUMNS))), self.level)
+        if self._t0_ns is None:
+            self._t0_ns = int(stamps_ns[0])
+        # nominal rate from the first stamps (fixed once known)
+        if self.fs is None:
+            self._stamp_buf.extend(stamps_ns[:64].tolist())
+            if len(self._stamp_buf) >= 16:
+                d = np.diff(np.asarray(self._stamp_buf[:64]))
+                d = d[d > 0]
+                if len(d):
+                    self.fs = 1e9 / float(np.median(d))
+                    self._configure_rates()
+        fs = self.fs or 1000.0
+        t = (stamps_ns - self._t0_ns) * 1e-9  # s since mission start
+        # 2. gaps and NaN -> resets and validity
+        valid = np.isfinite(V).all(axis=1)
+        last = self.last_ns if self.last_ns is not None else int(stamps_ns[0])
+        step = np.diff(np.concatenate([[last], stamps_ns])) * 1e-9 * fs
+        gap = step > cfg.max_gap_samples + 0.5
+        if (step > 1.5).any():
+            big = step > 1.5
+            self.health.n_gaps += int(big.sum())
+            self.health.n_missing += int(np.round(step[big] - 1).sum())
+        # NaN runs longer than max_gap_samples: a reset at the first valid sample after
+        nanrun = self._nan_run
+        reset_at = gap.copy()
+        if not valid.all():
+            self.health.n_nan += int((~valid).sum())
+            from hd_onboard.detector import run_lengths
+
+            runs = run_lengths(~valid, nanrun)
+            after = np.concatenate([[nanrun], runs[:-1]])
+            reset_at |= valid & (after > cfg.max_gap_samples)
+            self._nan_run = int(runs[-1])
+        else:
+            self._nan_run = 0
+        # 3. twin inputs: held NaN, temperature and command held
+        Vh = V.copy()
+        if not valid.all():
+            prevrow = self._hold
+            Vx = np.vstack([prevrow[None, :], Vh])
+            ok = np.isfinite(Vx)
+            idx = np.maximum.accumulate(np.where(ok, np.arange(len(Vx))[:, None], 0), axis=0)
+            Vh = Vx[idx, np.arange(6)[None, :]][1:]
+        X = np.empty((n, 7))
+        X[:, 0] = Vh[:, 0]  # theta_m
+        X[:, 1] = Vh[:, 2]  # omega_m
+        X[:, 2] = Vh[:, 4]  # tau_m
+        X[:, 3] = Vh[:, 1]  # theta_f
+        X[:, 4] = Vh[:, 3]  # omega_f
+        X[:, I_TEMP] = self.temperature
+        X[:, I_REF] = self.theta_ref
+        # 4. expected response, per segment (reset at dropouts)
+        Q_hat = np.empty(n)
+        cuts = np.flatnonzero(reset_at)
+        bounds = [0] + [int(c) for c in cuts if c > 0] + [n]
+        if len(cuts) and cuts[0] == 0:
+            self._reset_segment(t[0])
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            if a > 0:
+                self._reset_segment(t[a])
+            Q_hat[a:b] = self.expected.step(t[a:b], X[a:b])
+        self._hold = Vh[-1].copy()
+        # 5. residuals
+        Q_meas = V[:, 5]
+        r_Q = Q_meas - Q_hat
+        Q_for_twist = np.where(np.isfinite(Q_meas), Q_meas, Q_hat)
+        twist = (V[:, 1] - V[:, 0] / self.params.N) - Q_for_twist / self.params.K_out
+        evaluate = valid & (t >= self._settle_until)
+        r_Q = np.where(evaluate, r_Q, np.nan)
+        twist = np.where(evaluate, twist, np.nan)
+        # twist zero over the warm-up
+        if self._twist_zero is None:
+            self._twist_warm.append(twist[t < cfg.warmup_s])
+            if t[-1] >= cfg.warmup_s:
+                w = np.concatenate(self._twist_warm)
+                w = w[np.isfinite(w)]
+                self._twist_zero = float(np.median(w)) if len(w) else 0.0
+                self._twist_warm = []
+        if self._twist_zero is not None:
+            r_tw = np.where(t < cfg.warmup_s, np.nan, twist - self._twist_zero)
+        else:
+            r_tw = np.full(n, np.nan)
+        # 6. self-calibration when the ground has not given thresholds
+        if not self.calibrated:
+            self._self_calibrate(t, {"Q_red": r_Q, "twist": twist})
+        # 7. detectors
+        res = {"Q_red": r_Q, "twist": r_tw}
+        cw = np.zeros(n, bool)
+        ce = np.zeros(n, bool)
+        es = {}
+        for c, d in self.detectors.items():
+            r = res[c]
+            if c not in self._given_thresholds:
+                # self-calibrated lines: the warm-up they were learnt on is not evaluated
+                r = np.where(t < cfg.warmup_s, np.nan, r) if self.calibrated else np.full(n, np.nan)
+            z, e, w_, e_ = d.step(r)
+            es[c] = np.where(np.isfinite(r), e, np.nan)
+            cw |= w_ & np.isfinite(r)
+            ce |= e_ & np.isfinite(r)
+        lev = self.latch.step(t, cw, ce)
+        events = []
+        if len(lev):
+            prev_level = self.level
+            rises = np.flatnonzero(np.diff(np.concatenate([[prev_level], lev]).astype(int)) > 0)
+            for i in rises:
+                which = [c for c in CHANNELS if np.isfinite(es[c][i]) and abs(es[c][i]) > self.detectors[c].threshold.h_warn]
+                events.append((int(stamps_ns[i]), int(lev[i]), ",".join(which) or "held"))
+                if self.onset_ns is None:
+                    self.onset_ns = int(stamps_ns[i])
+            self.level = int(lev[-1])
+        table = np.column_stack([stamps_ns * 1e-9, Q_meas, Q_hat, r_Q, es["Q_red"], r_tw, es["twist"], lev.astype(float)])
+        self.last_ns = int(stamps_ns[-1])
+        # 8. windows
+        windows = self._windows(t, stamps_ns, table, V, evaluate)
+        return PushResult(table, self.level, events, windows)
+
+    def _reset_segment(self, t_s: float) -> None:
+        self.expected.reset()
+        self.health.n_resets += 1
+        self._settle_until = t_s + self.cfg.settle_s
+
+    def _self_calibrate(self, t: np.ndarray, res: dict[str, np.ndarray]) -> None:
+        """Lines from the first ``warmup_s`` of the mission (used only when the ground gave none)."""
+        from hd_ground.thresholds import channel_threshold  # same arithmetic as the ground's calibration
+
+        cfg = self.cfg
+        for c in CHANNELS:
+            if c in self._given_thresholds:
+                continue
+            self._warm[c].append(res[c][t < cfg.warmup_s])
+        if t[-1] < cfg.warmup_s:
+            return
+        fs = self.fs or 1000.0
+        for c in CHANNELS:
+            if c in self._given_thresholds:
+                continue
+            r = np.concatenate(self._warm[c]) if self._warm[c] else np.empty(0)
+            if c == "twist":
+                r = r - (self._twist_zero if self._twist_zero is not None else np.nanmedian(r) if np.isfinite(r).any() else 0.0)
+            th = channel_threshold([r], fs=fs, ewma_tau_s=cfg.ewma_tau_s, warn_margin=cfg.warn_margin,
+                                   error_margin=cfg.error_margin, min_h_warn=cfg.default_h_warn,
+                                   min_h_error=cfg.default_h_error, source="self-calibrated (mission warm-up)")
+            if th is not None:
+                self.detectors[c].threshold = th
+                self.detectors[c].reset()
+            self._warm[c] = []
+        self.calibrated = True
+
+    def _windows(self, t, stamps_ns, table, V, evaluate) -> list[dict[str, Any]]:
+        w = self.cfg.window_s
+        widx = np.floor(t / w).astype(np.int64)
+        out = []
+        if self._win_index is None:
+            self._win_index = int(widx[0])
+        cut = np.flatnonzero(widx != self._win_index)
+        start = 0
+        while len(cut):
+            c = int(cut[0])
+            self._win.append(table[start:c])
+            self._win_raw.append(V[start:c])
+            out.append(self._close_window())
+            self._win_index = int(widx[c])
+            start = c
+            cut = np.flatnonzero(widx[start:] != self._win_index) + start
+        self._win.append(table[start:])
+        self._win_raw.append(V[start:])
+        return [o for o in out if o is not None]
+
+    def _close_window(self) -> dict[str, Any] | None:
+        tab = np.concatenate(self._win) if self._win else np.empty((0, len(RESIDUAL_COLUMNS)))
+        raw = np.concatenate(self._win_raw) if self._win_raw else np.empty((0, 6))
+        self._win, self._win_raw = [], []
+        if len(tab) == 0:
+            return None
+        row: dict[str, Any] = {
+            "stamp_start": float(tab[0, 0]),
+            "stamp_end": float(tab[-1, 0]),
+            "t_start": float(self._win_index * self.cfg.window_s),
+            "n": float(len(tab)),
+            "max_level": float(np.max(tab[:, 7])),
+        }
+        for c, rcol, ecol in (("Q_red", 3, 4), ("twist", 5, 6)):
+            r = tab[:, rcol]
+            e = tab[:, ecol]
+            ok = np.isfinite(r)
+            nv = int(ok.sum())
+            th = self.detectors[c].threshold
+            if nv:
+                rv = r[ok]
+                row[f"{c}.mean"] = float(rv.mean())
+                row[f"{c}.std"] = float(rv.std())
+                row[f"{c}.rms"] = float(np.sqrt(np.mean(rv**2)))
+                ev = np.abs(e[np.isfinite(e)])
+                row[f"{c}.max_abs_e"] = float(ev.max()) if len(ev) else math.nan
+                row[f"{c}.frac_warn"] = float((ev > th.h_warn).mean()) if len(ev) else math.nan
+            else:
+                for s in ("mean", "std", "rms", "max_abs_e", "frac_warn"):
+                    row[f"{c}.{s}"] = math.nan
+            row[f"{c}.n_valid"] = float(nv)
+        if self.feature_fn is not None:
+            try:
+                feats = self.feature_fn(tab[:, 0], raw, self)
+                row.update({f"feat.{k}": float(v) for k, v in feats.items()})
+            except Exception as e:  # noqa: BLE001 - a feature failure must not stop monitoring
+                row["feat.error"] = math.nan
+                self.feature_error = f"{type(e).__name__}: {e}"
+        self.windows_emitted += 1
+        return row
+
+    def flush(self) -> list[dict[str, Any]]:
+        """Close the open window (end of mission)."""
+        if not self._win:
+            return []
+        r = self._close_window()
+        return [r] if r is not None else []
+
+
+def run_mission(mission, core: OnboardCore | None = None, block: int = 1000, **kw) -> dict[str, Any]:
+    """Batch: stream a whole Mission through an :class:`OnboardCore` in blocks of ``block`` samples.
+
+    Temperatures and commands are pushed in stamp order between the blocks.
+    Returns ``table`` (residual rows), ``windows`` (list of dicts), ``events``,
+    ``level`` (final), ``max_level``, ``onset_s`` (first rise, s since the
+    mission start or None), ``health`` (conditioning counts), ``core``.
+    """
+    if core is None:
+        core = OnboardCore(gear_ratio=mission.meta.gear_ratio, **kw)
+    t0 = mission.t0_ns
+    stamps = t0 + np.round(mission.t * 1e9).astype(np.int64)
+    V = np.column_stack([mission.theta_m, mission.theta_f, mission.omega_m, mission.omega_f, mission.tau_m, mission.Q_red])
+    temps = []
+    for frame, (tt, vv) in mission.temperatures.items():
+        if frame == "gearbox" or "gearbox" not in mission.temperatures:
+            temps = list(zip((t0 + np.round(np.asarray(tt) * 1e9)).astype(np.int64).tolist(), np.asarray(vv).tolist()))
+            break
+    cmds = list(zip((t0 + np.round(np.asarray(mission.t_cmd) * 1e9)).astype(np.int64).tolist(),
+                    np.asarray(mission.theta_ref).tolist()))
+    ti = ci = 0
+    tables, windows, events = [], [], []
+    for a in range(0, len(stamps), block):
+        b = min(a + block, len(stamps))
+        s0 = stamps[a]
+        while ti < len(temps) and temps[ti][0] <= s0:
+            core.push_temperature(*temps[ti])
+            ti += 1
+        while ci < len(cmds) and cmds[ci][0] <= s0:
+            core.push_command(*cmds[ci])
+            ci += 1
+        r = core.push(stamps[a:b], V[a:b])
+        tables.append(r.table)
+        windows += r.windows
+        events += r.events
+    windows += core.flush()
+    table = np.concatenate(tables) if tables else np.empty((0, len(RESIDUAL_COLUMNS)))
+    max_level = int(table[:, 7].max()) if len(table) else OK
+    return {
+        "table": table,
+        "windows": windows,
+        "events": events,
+        "level": core.level,
+        "max_level": max_level,
+        "onset_s": None if core.onset_ns is None else (core.onset_ns - t0) * 1e-9,
+        "health": core.health,
+        "core": core,
+    }
+
+
+LEVELS = (OK, WARN, ERROR)

@@ -1,0 +1,154 @@
+"""Expected response of the actuator: the twin in streaming form, or a physics-only stand-in.
+
+Both take blocks of the twin's raw input matrix ``X[n, 7]`` (columns
+``hd_twin.data.RAW_INPUTS``: theta_m rad, omega_m rad/s, tau_m N*m, theta_f
+rad, omega_f rad/s, temperature degC, theta_ref rad; NaN allowed) with the
+sample times, and return the expected reducer output torque ``Q_red_hat``
+[N*m] per sample, carrying their state between blocks; ``reset()`` starts a
+new segment (mission start, dropout).
+
+* :class:`OnnxTwinExpected` runs the trained PINN twin
+  (``hd_twin.runtime.StreamingTwin(model_dir)``, LSTM state carried).
+* :class:`PhysicsStandInExpected` is the **physics-only stand-in**, used when
+  no trained twin is given or it cannot be loaded: the twin's own declared
+  physics, quasi-static (``hd_twin.physics.quasi_static_Q_red``:
+  Q_red = N (Q_res - J_in theta_m'') - J_CS theta_f'' with input friction),
+  with theta_m'' and theta_f'' from causal filtered differences of the
+  measured speeds. It is a transparent baseline, not the paper's twin, and
+  every output of the stack says which one ran.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy.signal import butter, sosfilt, sosfilt_zi
+
+from hd_twin import physics as ph
+
+#: column indices in RAW_INPUTS order
+I_THM, I_WM, I_TAU, I_THF, I_WF, I_TEMP, I_REF = range(7)
+
+
+class CausalDerivative:
+    """Streaming derivative: backward difference then a 2nd-order Butterworth low-pass (state carried).
+
+    ``cutoff_hz`` [Hz]; the sample period is taken from the stamps of each
+    block (dt per sample), so jittered stamps are handled; NaN inputs are
+    held (the derivative is 0 across them).
+    """
+
+    def __init__(self, n_ch: int, cutoff_hz: float, fs_hz: float):
+        if not (cutoff_hz > 0 and fs_hz > 2 * cutoff_hz):
+            raise ValueError(f"derivative filter: cutoff {cutoff_hz} Hz must be in (0, fs/2 = {fs_hz / 2} Hz)")
+        self.sos = butter(2, cutoff_hz, fs=fs_hz, output="sos")
+        self.n_ch = n_ch
+        self.reset()
+
+    def reset(self) -> None:
+        self.prev = None  # last (t, x) per channel
+        self.zi = None
+
+    def step(self, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``t`` [s] (n,), ``x`` (n, n_ch) -> filtered derivative (n, n_ch), unit of x per second."""
+        n = len(t)
+        if n == 0:
+            return np.empty((0, self.n_ch))
+        x = np.array(x, dtype=float, copy=True)
+        # hold NaN: forward fill within the block (and from the previous block)
+        if self.prev is None:
+            t_prev, x_prev = t[0], np.where(np.isfinite(x[0]), x[0], 0.0)
+        else:
+            t_prev, x_prev = self.prev
+        bad = ~np.isfinite(x)
+        if bad.any():
+            xx = np.vstack([x_prev[None, :], x])
+            ok = np.isfinite(xx)
+            idx = np.where(ok, np.arange(len(xx))[:, None], 0)
+            idx = np.maximum.accumulate(idx, axis=0)
+            xx = xx[idx, np.arange(self.n_ch)[None, :]]
+            x = xx[1:]
+        tt = np.concatenate([[t_prev], t])
+        dt = np.diff(tt)
+        dx = np.diff(np.vstack([x_prev[None, :], x]), axis=0)
+        d = np.where(dt[:, None] > 0, dx / np.where(dt > 0, dt, 1.0)[:, None], 0.0)
+        if self.zi is None:
+            self.zi = np.repeat(sosfilt_zi(self.sos)[:, :, None], self.n_ch, axis=2) * d[0][None, None, :]
+        y, self.zi = sosfilt(self.sos, d, axis=0, zi=self.zi)
+        self.prev = (t[-1], x[-1].copy())
+        return y
+
+
+class PhysicsStandInExpected:
+    """Physics-only stand-in for the twin (see module docstring)."""
+
+    kind = "physics_standin"
+
+    def __init__(self, params: ph.TwinParams, effects=ph.DEFAULT_EFFECTS, fs_hz: float = 1000.0,
+                 accel_cutoff_hz: float = 50.0):
+        self.params = params
+        self.effects = list(effects)
+        self.version = f"physics-standin({params.source})"
+        self.deriv = CausalDerivative(2, min(accel_cutoff_hz, 0.4 * fs_hz), fs_hz)
+
+    def reset(self) -> None:
+        self.deriv.reset()
+
+    def set_params(self, params: ph.TwinParams) -> None:
+        self.params = params
+        self.version = f"physics-standin({params.source})"
+
+    def step(self, t: np.ndarray, X: np.ndarray) -> np.ndarray:
+        acc = self.deriv.step(t, X[:, [I_WM, I_WF]])
+        temp = X[:, I_TEMP]
+        temp = temp if np.isfinite(temp).all() else None
+        return ph.quasi_static_Q_red(self.params, self.effects, X[:, I_TAU], X[:, I_WM], temp,
+                                     theta_m_dd=acc[:, 0], theta_f_dd=acc[:, 1])
+
+
+class OnnxTwinExpected:
+    """The trained twin (ONNX, LSTM state carried) through ``hd_twin.runtime.StreamingTwin``."""
+
+    kind = "onnx_twin"
+
+    def __init__(self, model_dir: str, N: float | None = None):
+        try:
+            from hd_twin.runtime import StreamingTwin
+        except ImportError as e:  # the twin package has no runtime in this checkout
+            raise ValueError(f"{model_dir}: cannot load the streaming twin runtime ({e})") from None
+        self.twin = StreamingTwin(model_dir)
+        self.model_dir = str(model_dir)
+        self.version = str(getattr(self.twin, "version", None) or getattr(self.twin, "model_version", None) or model_dir)
+        self.N = N
+        self._delay = 0
+
+    def reset(self) -> None:
+        self.twin.reset()
+
+    def step(self, t: np.ndarray, X: np.ndarray) -> np.ndarray:
+        out = self.twin.step(X)
+        out = out.get("Q_red") if isinstance(out, dict) else out
+        out = np.asarray(out, dtype=float)
+        if out.ndim == 2:
+            out = out[:, 0]
+        if len(out) != len(X):
+            raise ValueError(f"{self.model_dir}: streaming twin returned {len(out)} outputs for {len(X)} inputs")
+        return out
+
+
+def make_expected(model_dir: str | None, params: ph.TwinParams, effects=ph.DEFAULT_EFFECTS,
+                  fs_hz: float = 1000.0, log=None) -> Any:
+    """The ONNX twin when ``model_dir`` is given and loads, else the physics-only stand-in (logged)."""
+    if model_dir:
+        try:
+            return OnnxTwinExpected(model_dir)
+        except Exception as e:  # noqa: BLE001 - any load failure falls back, loudly
+            if log:
+                log(f"twin model {model_dir!r} not usable ({e}); using the physics-only stand-in")
+    return PhysicsStandInExpected(params, effects, fs_hz=fs_hz)
+
+
+def finite_or(x: float, default: float) -> float:
+    return float(x) if x is not None and math.isfinite(float(x)) else float(default)

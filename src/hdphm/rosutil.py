@@ -1,0 +1,418 @@
+"""Shared ROS 2 helpers for the hdphm stack: topic names, QoS, message codecs.
+
+Only standard message types travel on the wire (no custom .msg packages can be
+built from the wheels): ``sensor_msgs``, ``std_msgs``, ``diagnostic_msgs``.
+Every topic of the stack is listed here with its QoS, so nodes, replay and the
+recorder agree by construction; ``docs/INTERFACES.md`` is the human table of
+the same facts.
+
+Numeric streams of the stack (residuals, features, health) are
+``std_msgs/msg/Float64MultiArray`` with a 2-D row-major layout: ``dim[0]``
+(label ``"rows"``) counts rows (samples or windows), ``dim[1]`` has the
+comma-separated column names as its label, so a row block is self-describing
+(:func:`pack_table` / :func:`unpack_table`). Parameter-like state (twin,
+mission metadata) is JSON in ``std_msgs/msg/String``, latched.
+
+This module imports rclpy lazily inside functions where possible so that
+``import hdphm.rosutil`` stays cheap for the CLI.
+"""
+
+from __future__ import annotations
+
+import array
+import importlib
+import json
+import math
+import os
+import struct
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+# --------------------------------------------------------------------------
+# topic names
+# --------------------------------------------------------------------------
+TOPIC_JOINT_STATES = "/hd/joint_states"
+TOPIC_COMMAND = "/hd/command"
+TOPIC_TEMPERATURE = "/hd/temperature"
+CONTRACT_TOPICS = (TOPIC_JOINT_STATES, TOPIC_COMMAND, TOPIC_TEMPERATURE)
+#: Mission metadata (the bag's ``hd_mission`` record) as JSON, latched; published by replay
+#: (or a live actuator's driver) before the samples of a mission.
+TOPIC_MISSION = "/hd/mission"
+TOPIC_TWIN_STATE = "/hd/twin/state"
+TOPIC_TWIN_UPDATE = "/hd/twin/update"
+TOPIC_RESIDUALS = "/hd/onboard/residuals"
+TOPIC_FEATURES = "/hd/onboard/features"
+TOPIC_HEALTH = "/hd/prognostic/health"
+TOPIC_GROUND_REPORT = "/hd/ground/report"
+TOPIC_DIAGNOSTICS = "/diagnostics"
+
+#: type strings as they appear in the ROS graph and in MCAP schema names
+TYPE_JOINT_STATE = "sensor_msgs/msg/JointState"
+TYPE_TEMPERATURE = "sensor_msgs/msg/Temperature"
+TYPE_STRING = "std_msgs/msg/String"
+TYPE_F64_ARRAY = "std_msgs/msg/Float64MultiArray"
+TYPE_DIAG_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+
+#: topic -> (type, qos key) for every topic the stack itself publishes or consumes.
+STACK_TOPICS: dict[str, tuple[str, str]] = {
+    TOPIC_JOINT_STATES: (TYPE_JOINT_STATE, "sensor"),
+    TOPIC_COMMAND: (TYPE_JOINT_STATE, "sensor"),
+    TOPIC_TEMPERATURE: (TYPE_TEMPERATURE, "sensor"),
+    TOPIC_MISSION: (TYPE_STRING, "latched"),
+    TOPIC_TWIN_STATE: (TYPE_STRING, "latched"),
+    TOPIC_TWIN_UPDATE: (TYPE_STRING, "latched"),
+    TOPIC_RESIDUALS: (TYPE_F64_ARRAY, "stream"),
+    TOPIC_FEATURES: (TYPE_F64_ARRAY, "stream"),
+    TOPIC_HEALTH: (TYPE_F64_ARRAY, "stream"),
+    TOPIC_GROUND_REPORT: (TYPE_STRING, "latched"),
+    TOPIC_DIAGNOSTICS: (TYPE_DIAG_ARRAY, "diagnostics"),
+}
+
+# --------------------------------------------------------------------------
+# QoS
+# --------------------------------------------------------------------------
+#: History depth of sensor topics. Reliable + KEEP_ALL on both sides gives
+#: flow control: a full reader history withholds acknowledgements, so
+#: ``replay --rate max`` is throttled by the slowest subscriber instead of
+#: losing samples.
+SENSOR_DEPTH = 5000
+
+
+def qos(kind: str):
+    """The QoS profile of a topic class: ``sensor``, ``stream``, ``latched``, ``diagnostics``.
+
+    - sensor: reliable, keep-all (bounded by the middleware's resource limits),
+      volatile: contract topics; no sample lost at any replay rate.
+    - stream: reliable, keep-last 1000, volatile: residual/feature/health blocks.
+    - latched: reliable, keep-last 1, transient-local: twin state, updates, mission metadata.
+    - diagnostics: reliable, keep-last 100, volatile (as diagnostic_updater).
+    """
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    if kind == "sensor":
+        return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=SENSOR_DEPTH,
+                          reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    if kind == "stream":
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                          reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    if kind == "latched":
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                          reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    if kind == "diagnostics":
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                          reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    raise ValueError(f"unknown QoS class {kind!r}; one of sensor, stream, latched, diagnostics")
+
+
+def topic_qos(topic: str):
+    """QoS profile of a stack topic (unknown topics get ``stream``)."""
+    return qos(STACK_TOPICS.get(topic, ("", "stream"))[1])
+
+
+def offered_qos_yaml(profiles: Iterable[Any]) -> str:
+    """``offered_qos_profiles`` channel metadata in the YAML form ``ros2 bag`` writes.
+
+    ``profiles`` are rclpy ``QoSProfile`` objects (one per publisher). Enum
+    values are the rmw integers (history 1 keep_last / 2 keep_all,
+    reliability 1 reliable / 2 best_effort, durability 1 transient_local /
+    2 volatile), durations as sec/nsec with the "infinite" sentinel.
+    """
+    out = []
+    for p in profiles:
+        def dur(d) -> str:
+            ns = int(getattr(d, "nanoseconds", 0))
+            if ns <= 0 or ns >= 2**63 - 1:
+                return "    sec: 9223372036\n    nsec: 854775807"
+            return f"    sec: {ns // 10**9}\n    nsec: {ns % 10**9}"
+
+        out.append(
+            f"- history: {int(p.history)}\n  depth: {int(p.depth)}\n  reliability: {int(p.reliability)}\n"
+            f"  durability: {int(p.durability)}\n  deadline:\n{dur(p.deadline)}\n  lifespan:\n{dur(p.lifespan)}\n"
+            f"  liveliness: {int(p.liveliness)}\n  liveliness_lease_duration:\n{dur(p.liveliness_lease_duration)}\n"
+            f"  avoid_ros_namespace_conventions: false"
+        )
+    return "\n".join(out)
+
+
+# --------------------------------------------------------------------------
+# domains, contexts
+# --------------------------------------------------------------------------
+def init_context(domain_id: int | None = None, args: list[str] | None = None):
+    """A fresh rclpy Context on ``domain_id`` (None: ``$ROS_DOMAIN_ID`` or 0).
+
+    Discovery is limited to this host (``ROS_AUTOMATIC_DISCOVERY_RANGE``
+    defaults to LOCALHOST here unless the user set it), so a test or a demo
+    never talks to machines on the network.
+    """
+    import rclpy
+
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if domain_id is not None and not (0 <= int(domain_id) <= 232):
+        raise ValueError(f"ROS domain id {domain_id} outside 0..232")
+    ctx = rclpy.Context()
+    rclpy.init(args=args, context=ctx, domain_id=None if domain_id is None else int(domain_id))
+    return ctx
+
+
+def message_class(type_name: str):
+    """Message class from a type string ``pkg/msg/Name`` (or ``pkg/Name``)."""
+    parts = type_name.split("/")
+    if len(parts) == 2:
+        parts = [parts[0], "msg", parts[1]]
+    if len(parts) != 3 or not all(parts):
+        raise ValueError(f"not a ROS message type name: {type_name!r}")
+    try:
+        mod = importlib.import_module(f"{parts[0]}.{parts[1]}")
+        return getattr(mod, parts[2])
+    except (ImportError, AttributeError):
+        raise ValueError(f"message type {type_name!r} is not installed in this environment") from None
+
+
+_SHARE_DIRS: list[Path] | None = None
+
+
+def _share_dirs() -> list[Path]:
+    global _SHARE_DIRS
+    if _SHARE_DIRS is None:
+        import sys
+
+        cands = [Path(sys.prefix) / "share"]
+        cands += [Path(p) / "share" for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+        _SHARE_DIRS = [c for c in cands if c.is_dir()]
+    return _SHARE_DIRS
+
+
+def _msg_file(pkg: str, name: str) -> str:
+    for d in _share_dirs():
+        f = d / pkg / "msg" / f"{name}.msg"
+        if f.is_file():
+            return f.read_text()
+    raise ValueError(f"no .msg definition found for {pkg}/msg/{name} under {', '.join(map(str, _share_dirs()))}")
+
+
+_PRIMITIVES = {
+    "bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32",
+    "int64", "uint64", "string", "wstring",
+}
+
+
+def message_definition(type_name: str) -> str:
+    """Full ``ros2msg`` schema text of a type with its dependencies, as ``ros2 bag`` writes it.
+
+    The main definition, then for every nested type a ``====`` separator line
+    and ``MSG: pkg/Name`` followed by its definition (depth-first, each once).
+    """
+    parts = type_name.split("/")
+    pkg, name = parts[0], parts[-1]
+    seen: list[str] = []
+    texts: dict[str, str] = {}
+
+    def deps(p: str, text: str) -> list[str]:
+        out = []
+        for line in text.splitlines():
+            line = line.split("#", 1)[0].strip()
+            if not line:
+                continue
+            tok = line.split()[0]
+            base = tok.split("[", 1)[0].split("<=", 1)[0]
+            if base in _PRIMITIVES or "=" in line.split(None, 1)[-1][:1]:
+                continue
+            if base == "Header":
+                q = "std_msgs/Header"
+            elif "/" in base:
+                q = base.replace("/msg/", "/")
+            else:
+                q = f"{p}/{base}"
+            out.append(q)
+        return out
+
+    def visit(q: str) -> None:
+        if q in texts:
+            return
+        p, n = q.split("/")
+        texts[q] = _msg_file(p, n)
+        seen.append(q)
+        for d in deps(p, texts[q]):
+            visit(d)
+
+    visit(f"{pkg}/{name}")
+    main = texts[seen[0]]
+    out = [main.rstrip("\n")]
+    for q in seen[1:]:
+        out.append("=" * 80 + f"\nMSG: {q}\n" + texts[q].rstrip("\n"))
+    return "\n".join(out) + "\n"
+
+
+# --------------------------------------------------------------------------
+# fast CDR codec for JointState (the hot path: 1-20 kHz)
+# --------------------------------------------------------------------------
+_U32 = struct.Struct("<I")
+_STAMP = struct.Struct("<iI")
+
+
+class CdrError(ValueError):
+    """A serialized message that does not decode as the expected type."""
+
+
+def decode_joint_state(buf: bytes) -> tuple[int, str, list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """Decode a CDR (little-endian) ``sensor_msgs/msg/JointState``.
+
+    Returns (stamp_ns, frame_id, names, position, velocity, effort), arrays
+    float64. About 10x faster than the generic deserializer; raises
+    :class:`CdrError` naming the problem for a malformed buffer.
+    """
+    try:
+        if len(buf) < 16:
+            raise CdrError(f"JointState message of {len(buf)} bytes is too short")
+        if buf[1] != 1:
+            raise CdrError("JointState message is not little-endian CDR (encapsulation kind %d)" % buf[1])
+        sec, nsec = _STAMP.unpack_from(buf, 4)
+        p = 12
+        (n,) = _U32.unpack_from(buf, p)
+        p += 4
+        frame = buf[p:p + n - 1].decode("utf-8", "replace") if n else ""
+        p += n
+        p = (p + 3) & ~3
+        (cnt,) = _U32.unpack_from(buf, p)
+        p += 4
+        if cnt > 1024:
+            raise CdrError(f"JointState with {cnt} names is not plausible")
+        names = []
+        for _ in range(cnt):
+            p = (p + 3) & ~3
+            (n,) = _U32.unpack_from(buf, p)
+            p += 4
+            names.append(buf[p:p + n - 1].decode("utf-8", "replace"))
+            p += n
+        arrs = []
+        for _ in range(3):
+            p = (p + 3) & ~3
+            (cnt,) = _U32.unpack_from(buf, p)
+            p += 4
+            if cnt:
+                # doubles aligned to 8 relative to the start of the CDR body (after the 4-byte header)
+                p = 4 + ((p - 4 + 7) & ~7)
+                end = p + 8 * cnt
+                if end > len(buf):
+                    raise CdrError(f"JointState array of {cnt} doubles runs past the end of the buffer")
+                arrs.append(np.frombuffer(buf, dtype="<f8", count=cnt, offset=p))
+                p = end
+            else:
+                arrs.append(np.empty(0))
+        return sec * 1_000_000_000 + nsec, frame, names, arrs[0], arrs[1], arrs[2]
+    except struct.error as e:
+        raise CdrError(f"truncated JointState message ({e})") from None
+
+
+def decode_temperature(buf: bytes) -> tuple[int, str, float]:
+    """Decode a CDR ``sensor_msgs/msg/Temperature`` -> (stamp_ns, frame_id, degC)."""
+    try:
+        sec, nsec = _STAMP.unpack_from(buf, 4)
+        (n,) = _U32.unpack_from(buf, 12)
+        p = 16
+        frame = buf[p:p + n - 1].decode("utf-8", "replace") if n else ""
+        p += n
+        p = 4 + ((p - 4 + 7) & ~7)
+        (temp,) = struct.unpack_from("<d", buf, p)
+        return sec * 1_000_000_000 + nsec, frame, temp
+    except struct.error as e:
+        raise CdrError(f"truncated Temperature message ({e})") from None
+
+
+# --------------------------------------------------------------------------
+# Float64MultiArray tables, JSON strings, stamps
+# --------------------------------------------------------------------------
+def pack_table(columns: list[str] | tuple[str, ...], rows: np.ndarray):
+    """A ``std_msgs/msg/Float64MultiArray`` holding ``rows`` (n x k) with named columns."""
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+    rows = np.asarray(rows, dtype=np.float64)
+    if rows.ndim == 1:
+        rows = rows[None, :]
+    n, k = rows.shape
+    if k != len(columns):
+        raise ValueError(f"table has {k} columns but {len(columns)} names")
+    m = Float64MultiArray()
+    m.layout.dim = [MultiArrayDimension(label="rows", size=n, stride=n * k),
+                    MultiArrayDimension(label=",".join(columns), size=k, stride=k)]
+    m.layout.data_offset = 0
+    m.data = array.array("d", np.ascontiguousarray(rows).tobytes())
+    return m
+
+
+def unpack_table(msg) -> tuple[list[str], np.ndarray]:
+    """Inverse of :func:`pack_table`: (column names, rows n x k)."""
+    dims = msg.layout.dim
+    if len(dims) != 2:
+        raise ValueError(f"Float64MultiArray table needs 2 layout dims, got {len(dims)}")
+    cols = dims[1].label.split(",")
+    data = np.asarray(msg.data, dtype=np.float64)
+    n, k = int(dims[0].size), int(dims[1].size)
+    if k != len(cols) or data.size != n * k:
+        raise ValueError(f"Float64MultiArray table layout {n}x{k} does not match {data.size} values / {len(cols)} names")
+    return cols, data.reshape(n, k)
+
+
+def json_msg(obj: Any):
+    """``std_msgs/msg/String`` carrying ``obj`` as JSON (NaN/inf written as null)."""
+    from std_msgs.msg import String
+
+    return String(data=json.dumps(_json_safe(obj), sort_keys=True))
+
+
+def _json_safe(o: Any) -> Any:
+    if isinstance(o, dict):
+        return {str(k): _json_safe(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_json_safe(v) for v in o]
+    if isinstance(o, (np.floating, float)):
+        f = float(o)
+        return f if math.isfinite(f) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.ndarray):
+        return _json_safe(o.tolist())
+    return o
+
+
+def parse_json_msg(msg, what: str) -> dict:
+    """Decode a JSON ``std_msgs/String``; raises ValueError naming ``what`` when it is not a JSON object."""
+    try:
+        obj = json.loads(msg.data)
+    except (json.JSONDecodeError, TypeError) as e:
+        raise ValueError(f"{what}: not valid JSON ({e})") from None
+    if not isinstance(obj, dict):
+        raise ValueError(f"{what}: expected a JSON object, got {type(obj).__name__}")
+    return obj
+
+
+def stamp_to_ns(stamp) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int):
+    from builtin_interfaces.msg import Time
+
+    ns = int(ns)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def take_all(sub, first) -> list:
+    """``first`` plus every message already queued on subscription ``sub``, in arrival order.
+
+    rclpy's executor costs tens of microseconds per callback; taking the
+    whole queue inside one callback makes 1-20 kHz topics affordable in
+    Python (measured: ~45 k messages/s through publish + take on one core)
+    and hands the core a block to process vectorised.
+    """
+    out = [first]
+    h = sub.handle
+    with h:
+        while True:
+            r = h.take_message(sub.msg_type, sub.raw)
+            if r is None:
+                break
+            out.append(r[0])
+    return out
