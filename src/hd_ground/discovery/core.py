@@ -232,6 +232,13 @@ class _BlockGram:
         self.yy = np.array([y[block == b] @ y[block == b] for b in self.blocks])
         self.Gt, self.gt = self.G.sum(0), self.g.sum(0)
 
+    def coef(self, idx: list[int]) -> np.ndarray:
+        """Least-squares coefficients on all blocks (unscaled units)."""
+        ix = np.asarray(idx)
+        G = self.Gt[np.ix_(ix, ix)]
+        lam = 1e-9 * np.trace(G) / len(ix)
+        return np.linalg.solve(G + lam * np.eye(len(ix)), self.gt[ix]) / self.scale[ix]
+
     def cv_sse(self, idx: list[int]) -> np.ndarray:
         """Held-out SSE per block when each block is predicted from the others."""
         ix = np.asarray(idx)
@@ -259,10 +266,19 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
     fams_used: set[str] = set()
     while len(selected) < opt.max_effects:
         best = None
+        per_fam: dict[str, list[tuple[int, np.ndarray]]] = {}
         for gi, (cand, cols) in enumerate(groups):
             if cand.family in fams_used:
                 continue
-            e = gram.cv_sse(cur_idx + cols)
+            if cand.positive and gram.coef(cur_idx + cols)[-1] <= 0:
+                continue  # the physics needs a positive coefficient: this variant is not that effect
+            per_fam.setdefault(cand.family, []).append((gi, gram.cv_sse(cur_idx + cols)))
+        for fam, lst in per_fam.items():
+            # variants of a family that explain the data equally well (within 10 % of the best variant's
+            # improvement) are not distinguishable here: keep the first, i.e. the library's preferred reading
+            eb = min(e.sum() for _, e in lst)
+            tol = 0.1 * max(cur.sum() - eb, 0.0)
+            gi, e = next((g, e) for g, e in lst if e.sum() <= eb + tol)
             if best is None or e.sum() < best[1].sum():
                 best = (gi, e)
         if best is None:
@@ -446,9 +462,10 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     score = heldout.copy()
     offsets: dict = {}
     base_pred = Xb_all @ beta[: len(cols)]
-    y_after_pred = base_pred + (evaluate_terms(terms, sig) if terms else 0.0)
     periodic_m = [t for t in terms if t.get("variable") == "theta_m" and t.get("order") is not None]
+    sig_eval = sig
     if opt.angle_offset == "estimate":
+        shift = np.zeros(ds.n)
         for b in np.unique(ds.bag[heldout]):
             rows = np.flatnonzero(heldout & (ds.bag == b))
             calib = rows[ds.tfrac[rows] < ds.tfrac[rows].min() + opt.calib_frac * np.ptp(ds.tfrac[rows])]
@@ -460,29 +477,26 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             y_rest = y[calib] - base_pred[calib] - (evaluate_terms(others, s_c) if others else 0.0)
             d = estimate_offset(periodic_m, s_c, y_rest)
             offsets[ds.bag_names[b]] = d
-            s_b = {k: v[rows] for k, v in sig.items()}
-            s_b["theta_m"] = s_b["theta_m"] + d
-            y_after_pred[rows] = base_pred[rows] + evaluate_terms(terms, s_b)
+            shift[rows] = d
+        sig_eval = dict(sig)
+        sig_eval["theta_m"] = sig["theta_m"] + shift
+    X_eval = X_all if sig_eval is sig else np.concatenate(
+        [Xb_all] + [basis_matrix(c.basis, sig_eval) for c, _ in groups], 1) if groups else Xb_all
     r_before = y - Xb_all @ beta_b
-    r_after = y - y_after_pred
+    r_after = y - X_eval[:, idx] @ beta
     eb = _err(r_before[score], y[score])
     ea = _err(r_after[score], y[score]) if terms else dict(eb)
 
-    # explained fraction per effect (drop it, keep the other coefficients), then order best first
+    # explained: fraction of the held-out baseline residual variance the effect removes when it alone is
+    # added to the baseline (refitted on the fit data); bounded above by 1
     sse_b = float(np.sum(r_before[score] ** 2))
     effects = []
-    for t in terms:
-        contrib = np.zeros(ds.n)
-        rows = np.flatnonzero(score)
-        s_sc = {k: v[rows] for k, v in sig.items()}
-        if t in periodic_m and offsets:
-            s_sc = dict(s_sc)
-            s_sc["theta_m"] = s_sc["theta_m"] + np.array([offsets.get(ds.bag_names[b], 0.0) for b in ds.bag[rows]])
-        contrib[rows] = evaluate_terms([t], s_sc)
-        sse_without = float(np.sum((r_after[score] + contrib[score]) ** 2))
-        sse_with = float(np.sum(r_after[score] ** 2))
+    for t, gi in zip(terms, sel):
+        ix1 = base_idx + groups[gi][1]
+        b1 = _lstsq(X_all[fit][:, ix1], y[fit])
+        sse1 = float(np.sum((y - X_eval[:, ix1] @ b1)[score] ** 2))
         effects.append({"name": t["name"], "variable": t["variable"], "order": t["order"], "form": t["form"],
-                        "parameters": t["parameters"], "explained": (sse_without - sse_with) / sse_b if sse_b > 0 else 0.0,
+                        "parameters": t["parameters"], "explained": (sse_b - sse1) / sse_b if sse_b > 0 else 0.0,
                         "signal": target})
     order = np.argsort([-e["explained"] for e in effects]) if effects else []
     effects = [effects[i] for i in order]

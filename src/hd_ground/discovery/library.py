@@ -39,6 +39,7 @@ class Candidate:
     to_parameters: Callable[[np.ndarray], dict] = field(repr=False, default=lambda c: {})
     requires: tuple[str, ...] = ()
     nonlinear: dict = field(default_factory=dict)  # fixed shape parameters (e.g. omega_s, delta)
+    positive: bool = False  # physics requires a positive coefficient (e.g. T_S - T_C > 0)
 
     def term(self, signal: str, coef) -> dict:
         """The fitted candidate as an ``hd_twin.terms`` term dict."""
@@ -127,7 +128,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                 [{"op": "stribeck", "var": "omega_m", "v_s": float(w_s), "delta": delta, "eps": ctx.sgn_eps}],
                 "(T_S - T_C) exp(-(|omega_m|/omega_s)^delta) sgn(omega_m)",
                 lambda c: {"T_S_minus_T_C": float(c[0])},
-                requires=("omega_m",), nonlinear={"omega_s": float(w_s), "delta": delta},
+                requires=("omega_m",), nonlinear={"omega_s": float(w_s), "delta": delta}, positive=True,
             ))
     # Temperature-dependent friction: viscous and Coulomb coefficients drifting with T.
     tref = {"op": "offset", "var": "temperature", "ref": ctx.t_ref}
@@ -174,7 +175,8 @@ def _periodic_name(target: str, var: str, k: float, variant: str) -> str:
     if variant == "sgn":
         return "position_periodic_friction"
     if variant == "iq":
-        return "current_ripple"
+        # torque ripple of a PMSM sits at multiples of 6 electrical orders (6 p k mechanical)
+        return "current_ripple" if int(k) % 6 == 0 else "unknown"
     if variant == "twist":
         return "position_dependent_stiffness" if var == "theta_m" else "unknown"
     # direction-independent
