@@ -207,12 +207,13 @@ class ExponentialFade(DegradationModel):
             n = len(x)
             sq = np.sqrt(np.maximum(dk, 0.0))
             out[:, 0] += self.sigma_C * sq * rng.standard_normal(n)
-            out[:, 1] = x[:, 1] + self.sigma_b * sq * rng.standard_normal(n)
+            # reflected at 0: capacity fade does not reverse on average (regeneration is noise)
+            out[:, 1] = -np.abs(x[:, 1] + self.sigma_b * sq * rng.standard_normal(n))
         return out
 
     def sample_prior(self, n, rng):
         C = self.C0_mean + self.C0_std * rng.standard_normal(n)
-        b = self.b_mean + self.b_std * rng.standard_normal(n)
+        b = -np.abs(self.b_mean + self.b_std * rng.standard_normal(n))
         return np.column_stack([C, b])
 
     def process_cov(self, x_mean, u):

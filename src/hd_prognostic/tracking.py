@@ -45,7 +45,8 @@ class RULHistory:
 
     def to_json(self) -> dict:
         d = {k: getattr(self, k) for k in ("unit", "time_unit", "t", "z", "state_mean", "state_p5", "state_p95",
-                                           "ess", "rul_t", "p5", "p50", "p95", "mean", "threshold", "meta")}
+                                           "ess", "rul_t", "p5", "p50", "p95", "mean", "threshold")}
+        d["meta"] = {k: v for k, v in self.meta.items() if k != "snapshots"}
         d["state_names"] = list(self.state_names)
         return _clean(d)
 
@@ -100,6 +101,7 @@ def track(
     keep_samples: int = 2000,
     rul_particles: int | None = None,
     progress: bool = False,
+    snapshots: tuple[int, ...] = (),
 ) -> RULHistory:
     """Filter ``obs`` and predict RUL at each step with ``times[k] >= t_start``.
 
@@ -119,6 +121,7 @@ def track(
     hist = RULHistory(unit=unit, time_unit=model.time_unit, state_names=model.state_names,
                       threshold=float(model.threshold))
     t0 = _time.perf_counter()
+    snaps: list[dict] = []
     for k in range(len(times)):
         pf.step(exposure[k], obs[k])
         w = pf.weights
@@ -136,6 +139,12 @@ def track(
             else:
                 xs, ws = pf.x, w
             r: RULResult = rul_distribution(model, xs, ws, fut, rul_step, max_steps, pf.rng)
+            if k in snapshots:
+                _, paths = rul_distribution(model, pf.resampled_particles()[:200], None, fut, rul_step, max_steps,
+                                            pf.rng, keep_paths=200)
+                snaps.append({"k": k, "t": float(times[k]), "x": pf.x.copy(), "w": w.copy(), "z": float(obs[k]),
+                              "rul": r, "paths": paths, "z_hist": obs[: k + 1].copy(),
+                              "t_hist": times[: k + 1].copy()})
             hist.rul_t.append(float(times[k]))
             hist.p5.append(r.p5)
             hist.p50.append(r.p50)
@@ -149,6 +158,8 @@ def track(
             print(f"  {unit}: step {k + 1}/{len(times)}  ESS {pf.ess():.0f}  "
                   f"{_time.perf_counter() - t0:.1f} s", flush=True)
     hist.meta["n_resample"] = pf.n_resample
+    if snaps:
+        hist.meta["snapshots"] = snaps
     hist.meta["n_particles"] = pf.n
     return hist
 

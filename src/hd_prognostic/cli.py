@@ -1,0 +1,255 @@
+"""Sub-commands of the prognostic package.
+
+``hdphm prognose BAG_DIR --out DIR [--obs-model JSON]``
+    particle-filter RUL history of one actuator (JSON + CSV + plots).
+``hdphm metrics RUL_HISTORY --truth EOL|BAG_DIR``
+    score a RUL history (truth: EOL time, or a simulated actuator's bags).
+``hdphm prognostic eval FLEET_DIR --out DIR``
+    held-out per-actuator evaluation on a simulated fleet (+ UKF baseline).
+``hdphm prognostic features FLEET_DIR --out DIR``
+    monotonicity / separability study of the health features.
+``hdphm prognostic fit-obs FLEET_DIR --out JSON``
+    fit the observation model + Archard prior on a (training) fleet.
+``hdphm prognostic battery|virkler --out DIR``
+    the same core on real degradation data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def _write_history(out: Path, hist, stem: str = "rul_history") -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{stem}.json").write_text(json.dumps(hist.to_json(), indent=1))
+    with open(out / f"{stem}.csv", "w") as f:
+        f.write(f"t_{hist.time_unit},z,rul_p5,rul_p50,rul_p95,rul_mean," + ",".join(
+            f"{n}_mean" for n in hist.state_names) + ",ess\n")
+        j = {t: i for i, t in enumerate(hist.rul_t)}
+        for i, t in enumerate(hist.t):
+            r = j.get(t)
+            vals = [hist.p5[r], hist.p50[r], hist.p95[r], hist.mean[r]] if r is not None else [""] * 4
+            f.write(",".join(str(v) for v in [t, hist.z[i], *vals, *hist.state_mean[i], hist.ess[i]]) + "\n")
+
+
+def _prognose(args) -> int:
+    from hd_prognostic.hd import DEFAULT_OBS_MODEL, build_model, extract_actuator, prognose
+    from hd_prognostic.observation import ObservationModel
+    from hd_prognostic.plots import save_snapshot, save_state_history
+
+    obs_path = Path(args.obs_model) if args.obs_model else DEFAULT_OBS_MODEL
+    if not obs_path.exists():
+        print(f"error: {obs_path}: observation model not found; fit one with "
+              f"'hdphm prognostic fit-obs FLEET_DIR --out obs.json' and pass --obs-model", file=sys.stderr)
+        return 2
+    obs = ObservationModel.from_json(obs_path)
+    out = Path(args.out)
+    a = extract_actuator(args.bag_dir, include_truth=False, progress=True)
+    n = len(a.mission_index)
+    hist = prognose(a, obs, n_particles=args.particles, seed=args.seed, likelihood=args.likelihood,
+                    snapshots=(max(0, n // 2), max(0, n - 1)), progress=True)
+    _write_history(out, hist)
+    model = build_model(obs)
+    for s in hist.meta.get("snapshots", []):
+        save_snapshot(out / f"pf_mission{int(s['t'])}.png", s, model, model.h_fail,
+                      title=f"{a.actuator_id}, mission {int(s['t'])}", state_scale=1e6, state_unit="um",
+                      time_unit="mission")
+    save_state_history(out / "state_history.png", hist, state_scale=1e6, state_unit="um",
+                       title=f"{a.actuator_id}: wear estimate")
+    last = hist.p5[-1], hist.p50[-1], hist.p95[-1]
+    print(f"{a.actuator_id}: {n} missions, last RUL P5/P50/P95 = {last[0]:.0f}/{last[1]:.0f}/{last[2]:.0f} missions; "
+          f"wrote {out}/rul_history.json, .csv and plots")
+    if a.errors:
+        print(f"skipped {len(a.errors)} unusable bags (listed in rul_history.json meta)", file=sys.stderr)
+    return 0
+
+
+def _metrics(args) -> int:
+    import numpy as np
+
+    from hd_prognostic import metrics as M
+    from hd_prognostic.plots import save_alpha_lambda
+    from hd_prognostic.tracking import RULHistory
+
+    p = Path(args.rul_history)
+    try:
+        hist = RULHistory.from_json(json.loads(p.read_text()))
+    except (OSError, json.JSONDecodeError, KeyError) as e:
+        print(f"error: {p}: not a RUL history ({e})", file=sys.stderr)
+        return 2
+    try:
+        eol = float(args.truth)
+    except ValueError:
+        from hd_prognostic.hd import extract_actuator
+
+        a = extract_actuator(args.truth, include_truth=True)
+        eol = a.eol_mission()
+        if not np.isfinite(eol):
+            print(f"error: {args.truth}: wear never reaches h_fail: no end of life to score against", file=sys.stderr)
+            return 2
+    m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, eol, alpha=args.alpha)
+    out = Path(args.out) if args.out else p.parent
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "metrics.json").write_text(json.dumps(m, indent=2, default=float))
+    save_alpha_lambda(out / "alpha_lambda.png", hist.rul_t, hist.p50, hist.p5, hist.p95, eol, args.alpha,
+                      title=f"{hist.unit}: alpha-lambda (alpha = {args.alpha:g})", unit=hist.time_unit)
+    print(json.dumps({k: v for k, v in m.items() if k != "pit"}, indent=2, default=float))
+    return 0
+
+
+def _eval(args) -> int:
+    from hd_prognostic.evaluate import fleet_eval, load_fleet
+
+    out = Path(args.out)
+    fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache")
+    s = fleet_eval(fleet, out, folds=args.folds, n_particles=args.particles, seed=args.seed, feature=args.feature,
+                   degree=args.degree, likelihood=args.likelihood, with_ukf=not args.no_ukf)
+    ag = s["aggregate"]
+    print("PF aggregate:", json.dumps(ag, indent=1, default=float))
+    if s["ukf_aggregate"]:
+        print("UKF aggregate:", json.dumps(s["ukf_aggregate"], indent=1, default=float))
+    if s["censored"]:
+        print("not scored (no end of life):", s["censored"])
+    print(f"wrote {out}/eval_summary.json, eval_per_actuator.csv, alpha_lambda.png")
+    return 0
+
+
+def _features(args) -> int:
+    from hd_prognostic.evaluate import feature_study, load_fleet
+
+    out = Path(args.out)
+    fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache")
+    res = feature_study(fleet, out)
+    for f, r in res.items():
+        print(f"{f:20s} Spearman {r['spearman_mean']:+.2f} (min {r['spearman_min']:+.2f})  "
+              f"Coble {r['coble_monotonicity_mean']:.2f}  AUC {r['auc_early_vs_advanced']:.2f}  "
+              f"Fisher {r['fisher_ratio']:.1f}")
+    print(f"wrote {out}/feature_monotonicity.png, feature_separability.png, hf_vs_wear.png, fault_to_failure.png")
+    return 0
+
+
+def _fit_obs(args) -> int:
+    from hd_prognostic.evaluate import load_fleet
+    from hd_prognostic.hd import fit_population
+
+    fleet = load_fleet(args.fleet_dir, cache_dir=Path(args.out).parent / "cache")
+    obs = fit_population(fleet, feature=args.feature, degree=args.degree)
+    obs.to_json(args.out)
+    print(json.dumps({"fit_info": obs.fit_info, "degradation": obs.degradation}, indent=1))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _battery(args) -> int:
+    import numpy as np
+
+    from hd_prognostic.plots import save_alpha_lambda_grid, save_state_history
+    from hd_prognostic.realdata import run_battery
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    r = run_battery(n_particles=args.particles, seed=args.seed, t_start=args.t_start)
+    hists = [u["history"] for u in r["units"].values()]
+    eols = [h.meta["t_eol"] for h in hists]
+    save_alpha_lambda_grid(out / "battery_alpha_lambda.png", hists, eols, 0.2, unit="cycle",
+                           title="NASA cells, exponential-fade PF (leave-one-cell-out prior)")
+    for h in hists:
+        save_state_history(out / f"battery_state_{h.unit.replace('%', 'pct').replace('@', '_')}.png", h,
+                           title=h.unit, state_unit="Ah")
+        _write_history(out, h, f"battery_{h.unit.replace('%', 'pct').replace('@', '_')}")
+    summ = {"per_unit": {k: {kk: vv for kk, vv in u["metrics"].items() if kk != "pit"} for k, u in r["units"].items()},
+            "aggregate": r["aggregate"], "skipped": r["skipped"]}
+    (out / "battery_metrics.json").write_text(json.dumps(summ, indent=2, default=float))
+    for k, u in r["units"].items():
+        m = u["metrics"]
+        print(f"{k}: EOL cycle {m['t_eol']:.0f}, in-cone(lambda>=0.5) {m['frac_in_cone_lambda_ge_0.5']:.2f}, "
+              f"P5-P95 coverage {m['coverage_p5_p95']:.2f}, RA(0.5) {m['relative_accuracy_lambda_0.5']:.2f}, "
+              f"CRA {m['cra']:.2f}, CRPS {m.get('crps_mean', np.nan):.1f} cycles")
+        for tp in (40, 60, 80, 100):
+            h = u["history"]
+            if tp in h.rul_t and tp < m["t_eol"]:
+                i = h.rul_t.index(tp)
+                print(f"    predicted at cycle {tp}: RUL P50 {h.p50[i]:.0f} [P5 {h.p5[i]:.0f}, P95 {h.p95[i]:.0f}]"
+                      f" vs true {m['t_eol'] - tp:.0f}")
+    print(f"skipped: {r['skipped']}")
+    print(f"wrote {out}/battery_metrics.json, battery_alpha_lambda.png")
+    return 0
+
+
+def _virkler(args) -> int:
+    from hd_prognostic.plots import save_alpha_lambda_grid
+    from hd_prognostic.realdata import run_virkler
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    r = run_virkler(n_particles=args.particles, seed=args.seed, max_specimens=args.max_specimens)
+    hs = [u["history"] for u in r["units"].values()]
+    sel = hs[:: max(1, len(hs) // 9)][:9]
+    save_alpha_lambda_grid(out / "virkler_alpha_lambda.png", sel, [h.meta["t_eol"] for h in sel], 0.2,
+                           unit="cycle", title="Virkler specimens (held-out half), Paris-law PF")
+    summ = {"fits": r["fits"], "aggregate": r["aggregate"],
+            "per_specimen": {str(k): {kk: vv for kk, vv in u["metrics"].items() if kk != "pit"}
+                             for k, u in r["units"].items()}}
+    (out / "virkler_metrics.json").write_text(json.dumps(summ, indent=2, default=float))
+    print("Paris fits (2 folds):", json.dumps(r["fits"], default=float))
+    print("aggregate over held-out specimens:", json.dumps(r["aggregate"], indent=1, default=float))
+    print(f"wrote {out}/virkler_metrics.json, virkler_alpha_lambda.png")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("prognose", help="particle-filter RUL history of one actuator's bags")
+    p.add_argument("bag_dir", help="folder with one actuator's mission bags (*.mcap)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--obs-model", default=None, help="observation-model JSON (default: the packaged one)")
+    p.add_argument("--particles", type=int, default=2000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--likelihood", choices=("gaussian", "student_t"), default="student_t")
+    p.set_defaults(func=_prognose)
+
+    p = sub.add_parser("metrics", help="score a RUL history against the true end of life")
+    p.add_argument("rul_history", help="rul_history.json from 'hdphm prognose'")
+    p.add_argument("--truth", required=True, help="true EOL (same time unit) or the simulated actuator's bag folder")
+    p.add_argument("--alpha", type=float, default=0.2)
+    p.add_argument("--out", default=None, help="output folder (default: next to the history)")
+    p.set_defaults(func=_metrics)
+
+    pg = sub.add_parser("prognostic", help="prognostic evaluations: eval, features, fit-obs, battery, virkler")
+    s = pg.add_subparsers(dest="prognostic_cmd", metavar="SUBCOMMAND")
+    p = s.add_parser("eval", help="held-out per-actuator evaluation on a simulated fleet")
+    p.add_argument("fleet_dir")
+    p.add_argument("--out", default="runs/prognostic_eval")
+    p.add_argument("--folds", type=int, default=4)
+    p.add_argument("--particles", type=int, default=2000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--feature", default="HF_MTW_IF")
+    p.add_argument("--degree", type=int, default=2)
+    p.add_argument("--likelihood", choices=("gaussian", "student_t"), default="student_t")
+    p.add_argument("--no-ukf", action="store_true", help="skip the UKF baseline")
+    p.set_defaults(func=_eval)
+    p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
+    p.add_argument("fleet_dir")
+    p.add_argument("--out", default="runs/prognostic_features")
+    p.set_defaults(func=_features)
+    p = s.add_parser("fit-obs", help="fit the observation model + Archard prior on a training fleet")
+    p.add_argument("fleet_dir")
+    p.add_argument("--out", required=True, help="JSON to write")
+    p.add_argument("--feature", default="HF_MTW_IF")
+    p.add_argument("--degree", type=int, default=2)
+    p.set_defaults(func=_fit_obs)
+    p = s.add_parser("battery", help="NASA B0005-7 exponential-fade PF, leave-one-cell-out")
+    p.add_argument("--out", default="runs/prognostic_battery")
+    p.add_argument("--particles", type=int, default=2000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--t-start", type=float, default=20.0, help="first prediction cycle")
+    p.set_defaults(func=_battery)
+    p = s.add_parser("virkler", help="Virkler crack growth, Paris-law PF, 2-fold over specimens")
+    p.add_argument("--out", default="runs/prognostic_virkler")
+    p.add_argument("--particles", type=int, default=2000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-specimens", type=int, default=None, help="held-out specimens per fold (default: all)")
+    p.set_defaults(func=_virkler)
+    pg.set_defaults(func=lambda a: (pg.print_help(), 2)[1])

@@ -1,0 +1,144 @@
+"""Observation model of the HD health feature: feature = f(wear) with heteroscedastic noise.
+
+``y | h ~ N(mu(h), sigma(h)^2)`` (or Student-t in the filter) with
+
+    mu(h)    = sum_j c_j (h / h_ref)^j          (polynomial, degree 1-3)
+    sigma(h) = s0 + s1 (h / h_ref)              (s0, s1 >= 0: spread grows with wear)
+
+fitted from a *training* population: pairs (true wear h from ``/sim/health``,
+feature value from the bag signals) of actuators other than the one under
+test. The feature may be normalised per actuator by its own beginning-of-life
+value (``baseline``: ``none``, ``subtract`` or ``ratio`` of the median over
+the first ``n_baseline`` missions): that uses only the unit's own early
+observations, which the onboard node has too. Saved as a small JSON that the
+prognostic node loads.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+BASELINES = ("none", "subtract", "ratio")
+
+
+@dataclass
+class ObservationModel:
+    """Heteroscedastic feature-vs-wear model (see module doc). Units: h in m, y in the feature's unit."""
+
+    feature: str = "HF_MTW_IF"
+    coef: list[float] = field(default_factory=lambda: [0.0, 1.0])  # mu polynomial in h/h_ref, ascending
+    s0: float = 1.0
+    s1: float = 0.0
+    h_ref: float = 1e-5  # m, scale of the wear axis
+    baseline: str = "none"
+    n_baseline: int = 3
+    h_fail: float = float("nan")  # m, the failure threshold of the training population (median)
+    fit_info: dict = field(default_factory=dict)
+    #: prior of the Archard model fitted on the same training population
+    #: (ArchardWear keyword arguments: log_kappa_mean/std, h0_mean/std, sigma_proc, h_fail) and
+    #: ``W_median`` [J], the population's median load-sliding integral per mission.
+    degradation: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.baseline not in BASELINES:
+            raise ValueError(f"ObservationModel.baseline must be one of {BASELINES}, got {self.baseline!r}")
+        if not (np.isfinite(self.h_ref) and self.h_ref > 0):
+            raise ValueError(f"ObservationModel.h_ref must be > 0, got {self.h_ref!r}")
+        if self.s0 < 0 or self.s1 < 0 or not np.isfinite(self.s0 + self.s1):
+            raise ValueError(f"ObservationModel: s0, s1 must be finite and >= 0, got {self.s0}, {self.s1}")
+        if self.s0 + self.s1 <= 0:
+            raise ValueError("ObservationModel: the noise std must be positive somewhere (s0 + s1 > 0)")
+
+    # ---- evaluation -----------------------------------------------------------
+    def mean(self, h: np.ndarray) -> np.ndarray:
+        return np.polynomial.polynomial.polyval(np.asarray(h, float) / self.h_ref, self.coef)
+
+    def std(self, h: np.ndarray) -> np.ndarray:
+        return self.s0 + self.s1 * np.maximum(np.asarray(h, float), 0.0) / self.h_ref
+
+    def __call__(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Observation function for a particle array (column 0 = wear depth h)."""
+        h = x[:, 0] if np.ndim(x) == 2 else x
+        return self.mean(h), self.std(h)
+
+    def normalise(self, y: np.ndarray) -> np.ndarray:
+        """Apply the per-actuator baseline normalisation to a feature series in mission order."""
+        y = np.asarray(y, float)
+        if self.baseline == "none" or len(y) == 0:
+            return y
+        first = y[: self.n_baseline]
+        first = first[np.isfinite(first)]
+        if len(first) == 0:
+            return np.full_like(y, np.nan)
+        b = float(np.median(first))
+        return y - b if self.baseline == "subtract" else y / b
+
+    # ---- fitting --------------------------------------------------------------
+    @classmethod
+    def fit(cls, h: np.ndarray, y: np.ndarray, feature: str = "HF_MTW_IF", degree: int = 2,
+            baseline: str = "none", n_baseline: int = 3, h_fail: float = float("nan")) -> "ObservationModel":
+        """Least-squares mean polynomial, then a linear fit of the scaled absolute residuals for sigma.
+
+        ``h`` and ``y`` are pooled over the training actuators (``y``
+        already normalised with the same ``baseline``). sigma is fitted on
+        sqrt(pi/2) |residual| (unbiased for a Gaussian) with non-negative
+        coefficients (projected least squares).
+        """
+        h, y = np.asarray(h, float), np.asarray(y, float)
+        ok = np.isfinite(h) & np.isfinite(y)
+        if ok.sum() < degree + 3:
+            raise ValueError(f"ObservationModel.fit: only {ok.sum()} valid (h, y) pairs for degree {degree}")
+        h, y = h[ok], y[ok]
+        h_ref = float(np.percentile(np.abs(h), 95)) or 1e-6
+        u = h / h_ref
+        coef = np.polynomial.polynomial.polyfit(u, y, degree)
+        r = y - np.polynomial.polynomial.polyval(u, coef)
+        a = np.sqrt(np.pi / 2) * np.abs(r)
+        A = np.column_stack([np.ones_like(u), np.maximum(u, 0)])
+        s, *_ = np.linalg.lstsq(A, a, rcond=None)
+        if s[1] < 0:
+            s = np.array([a.mean(), 0.0])
+        if s[0] < 0:
+            s1, *_ = np.linalg.lstsq(A[:, 1:], a, rcond=None)
+            s = np.array([0.0, max(float(s1[0]), 0.0)])
+        s0 = max(float(s[0]), 1e-3 * float(np.std(y)) + 1e-300)
+        # monotonicity of the mean over the fitted range (reported, not forced)
+        grid = np.linspace(0, u.max(), 50)
+        mono = bool(np.all(np.diff(np.polynomial.polynomial.polyval(grid, coef)) >= 0))
+        info = {"n": int(len(h)), "degree": degree, "rmse": float(np.sqrt(np.mean(r * r))),
+                "r2": float(1 - np.sum(r * r) / max(np.sum((y - y.mean()) ** 2), 1e-300)),
+                "h_max": float(h.max()), "mean_monotone_on_range": mono}
+        return cls(feature=feature, coef=[float(c) for c in coef], s0=s0, s1=float(s[1]), h_ref=h_ref,
+                   baseline=baseline, n_baseline=n_baseline, h_fail=float(h_fail), fit_info=info)
+
+    # ---- persistence ----------------------------------------------------------
+    def to_json(self, path: str | Path) -> Path:
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        d = asdict(self)
+        d["kind"] = "hd_prognostic.ObservationModel"
+        d["version"] = 1
+        p.write_text(json.dumps(d, indent=2))
+        return p
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> "ObservationModel":
+        p = Path(path)
+        try:
+            d = json.loads(p.read_text())
+        except FileNotFoundError:
+            raise FileNotFoundError(f"{p}: observation-model JSON not found") from None
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{p}: not valid JSON ({e})") from e
+        if d.get("kind") != "hd_prognostic.ObservationModel":
+            raise ValueError(f"{p}: not an hd_prognostic observation model (kind={d.get('kind')!r})")
+        d.pop("kind", None)
+        d.pop("version", None)
+        try:
+            return cls(**d)
+        except TypeError as e:
+            raise ValueError(f"{p}: bad observation-model fields ({e})") from e
