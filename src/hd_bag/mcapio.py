@@ -213,10 +213,11 @@ class McapFileWriter:
         self.flush()
 
     def write_chunk(self, blocks: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
-        """Write one chunk from ``(channel_id, log_time[n], records[n, W])`` blocks.
+        """Write one chunk from ``(channel_id, log_time[n], records)`` blocks.
 
-        ``records`` are complete Message records (see :func:`message_records`),
-        any width per block. Blocks are stored in the given order.
+        ``records`` are complete Message records: an (n, W) uint8 array (see
+        :func:`message_records`) or a list of n ``bytes`` of any length.
+        Blocks are stored in the given order.
         """
         blocks = [b for b in blocks if len(b[1])]
         if not blocks:
@@ -227,11 +228,19 @@ class McapFileWriter:
         t0 = min(int(b[1].min()) for b in blocks)
         t1 = max(int(b[1].max()) for b in blocks)
         for cid, lt, rec in blocks:
-            n, w = rec.shape
-            offs = off + w * np.arange(n, dtype=np.uint64)
+            if isinstance(rec, np.ndarray):
+                n, w = rec.shape
+                offs = off + w * np.arange(n, dtype=np.uint64)
+                parts.append(rec.tobytes())
+                size = n * w
+            else:  # list of record bytes of varying length
+                n = len(rec)
+                ln = np.array([len(r) for r in rec], np.uint64)
+                offs = off + np.concatenate([[0], np.cumsum(ln)[:-1]]).astype(np.uint64)
+                parts.append(b"".join(rec))
+                size = int(ln.sum())
             mi.setdefault(cid, []).append(np.stack([np.asarray(lt, np.uint64), offs], axis=1))
-            parts.append(rec.tobytes())
-            off += n * w
+            off += size
             self._counts[cid] = self._counts.get(cid, 0) + n
         raw = b"".join(parts)
         crc = zlib.crc32(raw)

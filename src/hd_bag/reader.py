@@ -608,10 +608,11 @@ _ROS_CLASSES: dict[str, Any] = {}
 def _ros_class(type_name: str):
     if type_name not in _ROS_CLASSES:
         try:
-            from rosidl_runtime_py.utilities import get_message
+            import importlib
 
-            _ROS_CLASSES[type_name] = get_message(type_name)
-        except Exception:  # no ROS wheels, or an unknown type
+            pkg, sub, name = type_name.split("/")
+            _ROS_CLASSES[type_name] = getattr(importlib.import_module(f"{pkg}.{sub}"), name)
+        except Exception:  # no ROS wheels, or a type whose package is not installed
             _ROS_CLASSES[type_name] = None
     return _ROS_CLASSES[type_name]
 

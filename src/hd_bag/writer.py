@@ -241,8 +241,11 @@ class MissionWriter:
                 rec = np.concatenate([p[1] for p in parts])
                 o = np.argsort(lt, kind="stable")
                 blocks.append((cid, lt[o], rec[o]))
-            else:
-                blocks.extend((cid, lt, rec) for lt, rec in parts)
+            else:  # mixed message lengths: interleave by log time as variable-length records
+                lt = np.concatenate([p[0] for p in parts])
+                recs = [r.tobytes() for _, rec in parts for r in rec]
+                o = np.argsort(lt, kind="stable")
+                blocks.append((cid, lt[o], [recs[i] for i in o.tolist()]))
         self._w.write_chunk(blocks)
         self._pending.clear()
         self._pending_bytes = 0

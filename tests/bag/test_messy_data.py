@@ -1,0 +1,166 @@
+"""Dropouts, duplicates, out-of-order stamps, NaN, absurd samples, mixed layouts; streaming writer crash."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import T0_NS, make_mission
+
+from hd_bag import BagError, MissionWriter, read_mission, validate_bag
+from hd_bag.mission import MAX_INTERP_GAP_SAMPLES
+
+
+def _write(path, m, stamps_ns, rows=None, cmd=True, temp=True, **js_overrides):
+    """Write joint states in the given (file) order with explicit stamps."""
+    sig = {k: getattr(m, k) for k in ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red")}
+    sig.update(js_overrides)
+    idx = np.arange(m.n) if rows is None else rows
+    with MissionWriter(path, m.meta) as w:
+        w.add_joint_states(stamps_ns, *(np.asarray(sig[k])[idx] for k in sig), log_time_ns=np.arange(len(idx)) + T0_NS)
+        if cmd:
+            w.add_command(T0_NS + np.round(m.t_cmd * 1e9).astype(np.int64), m.theta_ref)
+        if temp:
+            w.add_temperature("gearbox", T0_NS + np.round(m.t[::100] * 1e9).astype(np.int64), 20 + 0 * m.t[::100])
+    return path
+
+
+def _stamps(m):
+    return T0_NS + np.round(m.t * 1e9).astype(np.int64)
+
+
+def test_dropouts_marked_segments_split_never_interpolated(tmp_path):
+    m = make_mission(n=2000)
+    keep = np.ones(m.n, bool)
+    keep[100:105] = False  # 5 missing: gap, same segment
+    keep[1000:1000 + MAX_INTERP_GAP_SAMPLES + 5] = False  # > 10 missing: new segment
+    rows = np.nonzero(keep)[0]
+    p = _write(tmp_path / "d.mcap", m, _stamps(m)[rows], rows=rows)
+    r = read_mission(p)
+    assert r.n == keep.sum()
+    assert r.report.gaps == [(100, 5), (995, MAX_INTERP_GAP_SAMPLES + 5)]
+    assert r.segment[99] == 0 and r.segment[100] == 0 and r.segment[995] == 1 and r.segment[-1] == 1
+    np.testing.assert_array_equal(r.theta_f, m.theta_f[keep])  # nothing invented
+    assert any("dropout" in s for s in r.report.notes)
+    v = validate_bag(p)
+    assert [x.severity for x in v if "dropout" in x.problem] == ["warning"]
+
+
+def test_duplicates_and_slight_reordering_repaired_and_reported(tmp_path):
+    m = make_mission(n=1000)
+    rows = np.arange(m.n)
+    rows[[10, 11]] = rows[[11, 10]]  # swapped pair
+    rows[500:503] = rows[[502, 500, 501]]
+    rows = np.concatenate([rows[:700], [699, 699], rows[700:]])  # 699 three times
+    s = _stamps(m)[rows]
+    p = _write(tmp_path / "o.mcap", m, s, rows=rows)
+    r = read_mission(p)
+    assert r.n == m.n
+    np.testing.assert_array_equal(r.theta_m, m.theta_m)
+    assert r.report.n_duplicates == 2
+    assert r.report.n_reordered == 3  # 10 after 11, and 500, 501 after 502
+    assert any("re-sorted" in s for s in r.report.notes) and any("duplicate" in s for s in r.report.notes)
+    v = validate_bag(p)
+    dup = [x for x in v if "duplicate" in x.problem]
+    assert [x.index for x in dup] == [700, 701] and all(x.severity == "warning" for x in dup)
+    assert not [x for x in v if x.severity == "error"]
+
+
+def test_nan_kept_and_counted(tmp_path):
+    m = make_mission(n=1000)
+    tau = m.tau_m.copy()
+    tau[200:260] = np.nan
+    p = _write(tmp_path / "n.mcap", m, _stamps(m), tau_m=tau)
+    r = read_mission(p)
+    assert np.isnan(r.tau_m[200:260]).all() and np.isfinite(r.tau_m[:200]).all()
+    assert r.report.n_nan["tau_m"] == 60 and r.report.n_nan["theta_m"] == 0
+    assert not [x for x in validate_bag(p) if x.severity == "error"]
+
+
+def test_grossly_non_monotonic_stamps_are_fatal(tmp_path):
+    m = make_mission(n=1000)
+    s = _stamps(m)
+    s[600:] -= 2_000_000_000  # clock jumps back 2 s
+    p = _write(tmp_path / "j.mcap", m, s)
+    with pytest.raises(BagError, match=r"j\.mcap: .*not monotonic.*broken"):
+        read_mission(p)
+    assert any("not monotonic" in x.problem and x.severity == "error" for x in validate_bag(p))
+
+
+def test_unset_stamps_are_fatal(tmp_path):
+    m = make_mission(n=500)
+    p = _write(tmp_path / "z.mcap", m, np.zeros(m.n, np.int64))
+    with pytest.raises(BagError, match="distinct header.stamp"):
+        read_mission(p)
+
+
+def test_absurd_samples_nan_and_flagged_many_fatal(tmp_path):
+    m = make_mission(n=1000)
+    om = m.omega_m.copy()
+    om[[5, 17]] = [1e9, -np.inf]
+    p = _write(tmp_path / "a.mcap", m, _stamps(m), omega_m=om)
+    r = read_mission(p)
+    assert np.isnan(r.omega_m[[5, 17]]).all() and np.isfinite(np.delete(r.omega_m, [5, 17])).all()
+    v = [x for x in validate_bag(p) if "omega_m" in x.problem]
+    assert [x.index for x in v] == [5, 17] and all(x.severity == "error" for x in v)
+    om[:100] = 5e4
+    p2 = _write(tmp_path / "a2.mcap", m, _stamps(m), omega_m=om)
+    with pytest.raises(BagError, match=r"a2\.mcap: .*omega_m beyond physical limits"):
+        read_mission(p2)
+
+
+def test_missing_optional_topics_are_warnings(tmp_path):
+    m = make_mission(n=500)
+    p = _write(tmp_path / "c.mcap", m, _stamps(m), cmd=False, temp=False)
+    r = read_mission(p)
+    assert len(r.theta_ref) == 0 and r.temperatures == {}
+    assert np.isnan(r.temperature_on_t()).all()
+    v = validate_bag(p)
+    assert {x.topic for x in v} == {"/hd/command", "/hd/temperature"}
+    assert all(x.severity == "warning" for x in v)
+
+
+def test_names_in_any_order_and_mixed_layouts(tmp_path):
+    """Joint order swapped in some messages, an extra joint in others: mapped by name."""
+    from hd_bag import cdr
+
+    m = make_mission(n=600)
+    s = _stamps(m)
+    pos = np.stack([m.theta_m, m.theta_f], 1)
+    vel = np.stack([m.omega_m, m.omega_f], 1)
+    eff = np.stack([m.tau_m, m.Q_red], 1)
+    a = cdr.encode_jointstate(cdr.jointstate_layout(("motor", "output")), s[:200], pos[:200], vel[:200], eff[:200])
+    b = cdr.encode_jointstate(cdr.jointstate_layout(("output", "motor")), s[200:400], pos[200:400, ::-1],
+                              vel[200:400, ::-1], eff[200:400, ::-1])
+    z = np.zeros((200, 1))
+    c = cdr.encode_jointstate(cdr.jointstate_layout(("aux", "motor", "output"), "base"), s[400:],
+                              np.hstack([z, pos[400:]]), np.hstack([z, vel[400:]]), np.hstack([z, eff[400:]]))
+    with MissionWriter(tmp_path / "x.mcap", m.meta) as w:
+        # interleave the three layouts inside chunks
+        for k in range(0, 200, 50):
+            for rows, off in ((a, 0), (b, 200), (c, 400)):
+                w.add_rows("/hd/joint_states", rows[k:k + 50], s[off + k:off + k + 50])
+        w.add_command(s[::10], m.theta_ref)
+        w.add_temperature("gearbox", s[::100], 20 + 0 * s[::100])
+    r = read_mission(tmp_path / "x.mcap")
+    for k in ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red"):
+        np.testing.assert_array_equal(getattr(r, k), getattr(m, k))
+
+
+def test_streaming_writer_killed_mid_run_leaves_readable_file(tmp_path):
+    m = make_mission(n=5000)
+    s = _stamps(m)
+    w = MissionWriter(tmp_path / "k.mcap", m.meta, chunk_seconds=0.5)
+    for i in range(0, 3500, 100):  # a recorder adding 100-sample batches
+        sl = slice(i, i + 100)
+        w.add_joint_states(s[sl], m.theta_m[sl], m.theta_f[sl], m.omega_m[sl], m.omega_f[sl], m.tau_m[sl],
+                           m.Q_red[sl])
+    w._w._f.flush()
+    # process dies: no close(), no summary, and a half-written record at the end
+    with open(tmp_path / "k.mcap", "ab") as f:
+        f.write(b"\x06" + (10_000).to_bytes(8, "little") + b"\x00" * 100)
+    r = read_mission(tmp_path / "k.mcap")
+    assert 3000 <= r.n <= 3500  # every complete chunk, nothing after the cut
+    np.testing.assert_array_equal(r.theta_m, m.theta_m[:r.n])
+    assert any("truncated" in s for s in r.report.notes)
+    v = validate_bag(tmp_path / "k.mcap")
+    assert any("truncated" in x.problem and x.severity == "error" for x in v)
