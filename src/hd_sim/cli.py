@@ -1,0 +1,110 @@
+"""``hdphm sim ...``: simulate one mission bag, a fleet of run-to-failure lives, list the effects."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def _effects_from_args(args):
+    from .effects import EffectSet
+
+    return EffectSet.preset(args.preset).apply_cli(args.effect or (), args.param or ())
+
+
+def _add_effect_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--preset", default="default", choices=("default", "baseline", "ideal"),
+                   help="starting effect set: realistic defaults, the basic-twin baseline, or baseline "
+                        "without sensor imperfections and gusts (default: default)")
+    p.add_argument("--effect", action="append", metavar="NAME=on|off", help="switch an effect (repeatable)")
+    p.add_argument("--param", action="append", metavar="NAME.KEY=VALUE", help="set an effect parameter (repeatable)")
+    p.add_argument("--duration", type=float, default=20.0, help="mission length, s (default 20)")
+    p.add_argument("--fs", type=float, default=1000.0, help="log rate, Hz (default 1000)")
+    p.add_argument("--n-sub", type=int, default=40, help="internal steps per log sample (default 40: dt = 25 us)")
+    p.add_argument("--no-sim", action="store_true", help="do not write /sim/... ground truth")
+
+
+def _mission(args) -> int:
+    from hd_bag import write_mission
+
+    from .params import nominal, sample_population
+    from .plant import simulate_mission
+
+    effects = _effects_from_args(args)
+    params = nominal() if args.actuator is None else sample_population(args.actuator + 1, args.pop_seed)[-1]
+    wear = args.wear * 1e-6
+    health = {"h_plus": wear * (1 + args.wear_asym), "h_minus": wear * (1 - args.wear_asym)}
+    m, truth = simulate_mission(params, effects, args.profile, args.seed, duration=args.duration, fs=args.fs,
+                                health=health, mission_index=args.mission_index, n_sub=args.n_sub,
+                                T_amb=args.t_amb)
+    write_mission(args.out, m, sim=None if args.no_sim else truth)
+    print(f"wrote {args.out}: {m.n} samples, {m.duration:.2f} s, actuator {m.meta.actuator_id}, "
+          f"profile {args.profile}, h = {truth['health']['h'] * 1e6:.2f} um, effects on: "
+          + ",".join(k for k, v in effects.on.items() if v))
+    return 0
+
+
+def _fleet(args) -> int:
+    from .fleet import simulate_fleet
+
+    effects = _effects_from_args(args)
+    s = simulate_fleet(args.actuators, args.missions, args.out, seed=args.seed, effects=effects,
+                       duration=args.duration, fs=args.fs, workers=args.workers, n_sub=args.n_sub,
+                       profiles=args.profiles.split(","), stop_at_failure=not args.no_stop)
+    n_bags = sum(len(a["missions"]) for a in s["actuators"])
+    print(f"wrote {n_bags} bags for {args.actuators} actuators under {args.out}")
+    for a in s["actuators"]:
+        ms = a["missions"]
+        print(f"  {a['actuator_id']}: {len(ms)} missions, h {ms[0]['h'] * 1e6:.2f} -> {ms[-1]['h'] * 1e6:.2f} um "
+              f"(h_fail {a['params']['h_fail'] * 1e6:.1f} um), k_D {a['params']['k_D']:.2e}, "
+              f"EOL mission {a['eol_mission']}")
+    return 0
+
+
+def _effects(args) -> int:
+    from .effects import effects_table
+
+    print(effects_table(markdown=args.markdown))
+    return 0
+
+
+def register(subparsers) -> None:
+    sim = subparsers.add_parser("sim", help="plant simulator: mission bags, run-to-failure fleets, effects")
+    sub = sim.add_subparsers(dest="sim_command", metavar="SIMCOMMAND")
+    sim.set_defaults(func=lambda a: (sim.print_help(), 2)[1])
+
+    pm = sub.add_parser("mission", help="simulate one mission into a contract bag")
+    pm.add_argument("--out", required=True, help="output .mcap path")
+    from .profiles import PROFILES
+
+    pm.add_argument("--profile", default="inspection", choices=PROFILES)
+    pm.add_argument("--seed", type=int, default=0)
+    pm.add_argument("--actuator", type=int, default=None, help="unit index in the population (default: nominal unit)")
+    pm.add_argument("--pop-seed", type=int, default=0, help="population seed for --actuator")
+    pm.add_argument("--wear", type=float, default=0.0, help="mean flank wear at the start, um")
+    pm.add_argument("--wear-asym", type=float, default=0.0, help="(h+ - h-)/(h+ + h-), in [-1, 1]")
+    pm.add_argument("--mission-index", type=int, default=0)
+    pm.add_argument("--t-amb", type=float, default=None, help="ambient temperature, degC (default: random)")
+    _add_effect_args(pm)
+    pm.set_defaults(func=_mission)
+
+    pf = sub.add_parser("fleet", help="simulate run-to-failure lives: one folder per actuator, one bag per mission")
+    pf.add_argument("--actuators", type=int, required=True)
+    pf.add_argument("--missions", type=int, required=True, help="maximum missions per actuator")
+    pf.add_argument("--out", required=True, help="output folder")
+    pf.add_argument("--seed", type=int, default=0)
+    pf.add_argument("--workers", type=int, default=1, help="parallel processes (one actuator each)")
+    pf.add_argument("--profiles", default="inspection", help="comma-separated profile cycle (default inspection)")
+    pf.add_argument("--no-stop", action="store_true", help="keep simulating after failure")
+    _add_effect_args(pf)
+    pf.set_defaults(func=_fleet)
+
+    pe = sub.add_parser("effects", help="list the effect registry with defaults")
+    pe.add_argument("--markdown", action="store_true")
+    pe.set_defaults(func=_effects)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    from hdphm.cli import main
+
+    sys.exit(main(["sim", *sys.argv[1:]]))

@@ -1,0 +1,162 @@
+"""Fleets: run-to-failure lives of many actuators, one bag per mission, one folder per actuator.
+
+Two time scales (PHYSICS.md 4): each mission is a short dynamic inspection
+episode; between missions the wear state advances quasi-statically by
+Archard's law from the episode's own load spectrum (the per-flank integrals
+of |T_tr| |omega_m|), times the acceleration factor ``accel``. A life ends at
+the first mission whose starting mean flank wear reaches ``h_fail`` (that
+mission is still written: it is the failed state) or at ``n_missions``.
+Actuators are independent, so they run in parallel worker processes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zlib
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from .effects import EffectSet
+from .params import archard_increment, new_health, sample_population
+
+PROFILE_MIX = ("inspection",)
+
+
+def bag_name(actuator_id: str, mission_index: int) -> str:
+    """File name of a mission bag; sorts by mission index."""
+    return f"{actuator_id}_m{mission_index:04d}.mcap"
+
+
+def advance_health(health: Mapping[str, float], wear: Mapping[str, float], params: Mapping[str, Any],
+                   effects: EffectSet, mission_index: int) -> dict[str, float]:
+    """Health at the start of the next mission (quasi-static wear and fault growth)."""
+    h = dict(health)
+    lube = h.get("lube_loss", 0.0)
+    if effects.is_on("meshing_wear"):
+        h["h_plus"] = h["h_plus"] + archard_increment(wear["W_plus"], params, lube)
+        h["h_minus"] = h["h_minus"] + archard_increment(wear["W_minus"], params, lube)
+    for name, key in (("flexspline_stiffness_loss", "fs_loss"), ("lubrication_loss", "lube_loss")):
+        if effects.is_on(name) and mission_index + 1 >= effects.p(name, "onset"):
+            h[key] = min(h.get(key, 0.0) + effects.p(name, "rate"), 0.9)
+    return h
+
+
+def simulate_life(params: Mapping[str, Any], n_missions: int, out_dir: str | os.PathLike | None = None, *,
+                  effects: EffectSet | None = None, duration: float = 20.0, fs: float = 1000.0,
+                  seed: int = 0, profiles: Iterable[str] = PROFILE_MIX, n_sub: int = 40,
+                  stop_at_failure: bool = True, tick=None, write_sim: bool = True) -> list[dict[str, Any]]:
+    """One actuator's life; writes bags under ``out_dir/<actuator_id>/`` when given.
+
+    Returns one record per mission: index, file, health at start, wear integrals.
+    """
+    effects = effects if effects is not None else EffectSet.default()
+    profiles = tuple(profiles)
+    aid = str(params["actuator_id"])
+    health = new_health()
+    rows: list[dict[str, Any]] = []
+    hours = 0.0
+    if out_dir is not None:
+        adir = Path(out_dir) / aid
+        adir.mkdir(parents=True, exist_ok=True)
+    from .plant import simulate_mission
+
+    for m in range(n_missions):
+        mseed = int(np.random.default_rng([int(seed), int(params.get("seed", 0)), zlib.crc32(aid.encode()), m]).integers(2**31))
+        prof = profiles[m % len(profiles)]
+        mission, truth = simulate_mission(params, effects, prof, mseed, duration=duration, fs=fs, health=health,
+                                          mission_index=m, operating_hours=hours, n_sub=n_sub)
+        failed = 0.5 * (health["h_plus"] + health["h_minus"]) >= params["h_fail"]
+        rec = {"mission_index": m, "seed": mseed, "profile": prof, "operating_hours": hours,
+               **{k: float(v) for k, v in health.items()}, "h": 0.5 * (health["h_plus"] + health["h_minus"]),
+               **truth["wear"], "failed": bool(failed)}
+        if out_dir is not None:
+            from hd_bag import write_mission
+
+            path = Path(out_dir) / aid / bag_name(aid, m)
+            write_mission(path, mission, sim=truth if write_sim else None)
+            rec["file"] = str(path.relative_to(out_dir))
+        rows.append(rec)
+        if tick is not None:
+            tick()
+        if failed and stop_at_failure:
+            break
+        health = advance_health(health, truth["wear"], params, effects, m)
+        hours += float(params["accel"]) * duration / 3600.0
+    return rows
+
+
+def _life_worker(args):
+    params, n_missions, out_dir, kw = args
+    q = _QUEUE
+    tick = (lambda: q.put(1)) if q is not None else None
+    return params["actuator_id"], simulate_life(params, n_missions, out_dir, tick=tick, **kw)
+
+
+_QUEUE = None
+
+
+def _init_worker(q):
+    global _QUEUE
+    _QUEUE = q
+
+
+def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike, *, seed: int = 0,
+                   effects: EffectSet | None = None, duration: float = 20.0, fs: float = 1000.0,
+                   workers: int = 1, profiles: Iterable[str] = PROFILE_MIX, n_sub: int = 40,
+                   stop_at_failure: bool = True, progress: bool = True) -> dict[str, Any]:
+    """Simulate ``n_actuators`` lives of up to ``n_missions`` missions into ``out_dir``.
+
+    Writes ``out_dir/<actuator_id>/<actuator_id>_mNNNN.mcap`` and
+    ``out_dir/fleet_truth.json`` (ground truth per actuator: parameters, the
+    health before every mission, failure mission: for scoring only). Returns
+    that summary.
+    """
+    if n_actuators < 1 or n_missions < 1:
+        raise ValueError(f"need >= 1 actuator and >= 1 mission (got {n_actuators}, {n_missions})")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    effects = effects if effects is not None else EffectSet.default()
+    pop = sample_population(n_actuators, seed)
+    kw = dict(effects=effects, duration=duration, fs=fs, seed=seed, profiles=tuple(profiles), n_sub=n_sub,
+              stop_at_failure=stop_at_failure)
+    jobs = [(p, n_missions, str(out), kw) for p in pop]
+    results: dict[str, list] = {}
+    from tqdm import tqdm
+
+    bar = tqdm(total=n_actuators * n_missions, unit="mission", desc="sim fleet", disable=not progress)
+    if workers <= 1:
+        for params, n_m, od, _ in jobs:
+            results[params["actuator_id"]] = simulate_life(params, n_m, od, tick=lambda: bar.update(1), **kw)
+    else:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        q = ctx.Manager().Queue()
+        with ctx.Pool(workers, initializer=_init_worker, initargs=(q,)) as pool:
+            pending = pool.map_async(_life_worker, jobs)
+            while not pending.ready():
+                pending.wait(0.2)
+                while not q.empty():
+                    bar.update(q.get())
+            for aid, rows in pending.get():
+                results[aid] = rows
+            while not q.empty():
+                bar.update(q.get())
+    bar.close()
+    summary = {
+        "seed": seed, "duration_s": duration, "fs": fs, "effects": effects.to_json_dict(),
+        "actuators": [
+            {"actuator_id": p["actuator_id"],
+             "params": {k: v for k, v in p.items() if k != "effect_scale"},
+             "effect_scale": p.get("effect_scale", {}),
+             "eol_mission": next((r["mission_index"] for r in results[p["actuator_id"]] if r["failed"]), None),
+             "missions": results[p["actuator_id"]]}
+            for p in pop
+        ],
+    }
+    with open(out / "fleet_truth.json", "w") as f:
+        json.dump(summary, f, indent=1, default=float)
+    return summary
