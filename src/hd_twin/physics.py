@@ -155,7 +155,7 @@ class TwinParams:
     c_b: float = 1.4
     c_m: float = 172.0
     c_FS: float = 226.0
-    mu_c: float = 0.07
+    mu_c: float = 0.0029
     T_C: float = 0.1
     T_S: float = 0.13
     omega_s: float = 5.0

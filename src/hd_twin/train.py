@@ -369,7 +369,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
                 torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.grad_clip)
             opt.step()
             sched.step()
-            acc += [float(res["L_tot_report"]), float(res["L_d"]), float(res.get("L_c_ref", 0.0))]
+            acc += [float(res["L_tot_report"]), float(res["L_d"].detach()), float(res.get("L_c_ref", 0.0))]
             hist["lambda_c_steps"].append(float(pinn.lam.value().detach()))
         acc /= steps_per_epoch
         pinn.eval()
