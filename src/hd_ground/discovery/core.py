@@ -251,6 +251,33 @@ class _BlockGram:
         return self.yy - 2 * np.einsum("bi,bi->b", beta, gb) + np.einsum("bi,bij,bj->b", beta, Gb, beta)
 
 
+def _refine_stribeck(X_other, y_fit, sig, fit, cand, ctx):
+    """Least-squares (omega_s, delta) of a Stribeck column given the other columns; returns (w_s, delta, column)."""
+    from scipy.optimize import minimize_scalar
+
+    w = sig["omega_m"]
+    sg = np.tanh(w / ctx.sgn_eps)
+
+    def col(ws, d):
+        return np.exp(-((np.abs(w) / ws) ** d)) * sg
+
+    def sse(lws, d):
+        X = np.column_stack([X_other, col(np.exp(lws), d)[fit]])
+        b = _lstsq(X, y_fit)
+        if b[-1] <= 0:
+            return np.inf
+        return float(np.sum((y_fit - X @ b) ** 2))
+
+    w0 = float(cand.nonlinear["omega_s"])
+    best = (np.inf, w0, float(cand.nonlinear.get("delta", 1.0)))
+    for d in (0.5, 0.75, 1.0, 1.5, 2.0):
+        r = minimize_scalar(lambda lw: sse(lw, d), bounds=(np.log(w0) - 1.5, np.log(w0) + 1.5), method="bounded",
+                            options={"xatol": 1e-3})
+        if r.fun < best[0]:
+            best = (float(r.fun), float(np.exp(r.x)), d)
+    return best[1], best[2], col(best[1], best[2])
+
+
 def _lstsq(X, y):
     scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
     beta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
@@ -448,7 +475,15 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     base_idx = list(range(Xb_all.shape[1]))
     sel, trace = select_groups(gram, base_idx, groups, opt)
 
-    # 4. refit on all fit data
+    # 4. refine the shape parameters of a selected Stribeck term (the grid only located it), then refit
+    for gi in sel:
+        cand, cix = groups[gi]
+        if "omega_s" in cand.nonlinear and len(cix) == 1:
+            others = base_idx + [c for gj in sel if gj != gi for c in groups[gj][1]]
+            w_s, delta, col = _refine_stribeck(X_all[fit][:, others], y[fit], sig, fit, cand, ctx)
+            cand.basis[0].update(v_s=w_s, delta=delta)
+            cand.nonlinear.update(omega_s=w_s, delta=delta)
+            X_all[:, cix[0]] = col
     idx = base_idx + [c for gi in sel for c in groups[gi][1]]
     beta = _lstsq(X_all[fit][:, idx], y[fit])
     refit_params = {c.param: float(b) for c, b in zip(cols, beta[: len(cols)])}
