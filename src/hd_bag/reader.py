@@ -348,9 +348,11 @@ def _js_matrix(raw: _Raw, topic: str, acc: _JSAcc, want: tuple[str, ...], fields
         stamps[p:p + k] = s
         index[p:p + k] = ix
         arrs = {"position": pos, "velocity": vel, "effort": eff}
-        for c, (nm, fld) in enumerate(zip(want, fields)):
+        for nm in dict.fromkeys(want):
             if nm not in names:
                 missing_names[nm] = missing_names.get(nm, 0) + k
+        for c, (nm, fld) in enumerate(zip(want, fields)):
+            if nm not in names:
                 continue
             j = names.index(nm)
             a = arrs[fld]
