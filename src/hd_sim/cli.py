@@ -50,7 +50,8 @@ def _fleet(args) -> int:
     effects = _effects_from_args(args)
     s = simulate_fleet(args.actuators, args.missions, args.out, seed=args.seed, effects=effects,
                        duration=args.duration, fs=args.fs, workers=args.workers, n_sub=args.n_sub,
-                       profiles=args.profiles.split(","), stop_at_failure=not args.no_stop)
+                       profiles=args.profiles.split(","), stop_at_failure=not args.no_stop,
+                       sim_internal_every=args.sim_internal_every, progress=not args.quiet)
     n_bags = sum(len(a["missions"]) for a in s["actuators"])
     print(f"wrote {n_bags} bags for {args.actuators} actuators under {args.out}")
     for a in s["actuators"]:
@@ -96,6 +97,9 @@ def register(subparsers) -> None:
     pf.add_argument("--workers", type=int, default=1, help="parallel processes (one actuator each)")
     pf.add_argument("--profiles", default="inspection", help="comma-separated profile cycle (default inspection)")
     pf.add_argument("--no-stop", action="store_true", help="keep simulating after failure")
+    pf.add_argument("--sim-internal-every", type=int, default=10,
+                    help="write per-sample /sim/internal ground truth every K missions and the last (1 all, 0 none)")
+    pf.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_effect_args(pf)
     pf.set_defaults(func=_fleet)
 

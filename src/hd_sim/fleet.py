@@ -3,7 +3,7 @@
 Two time scales (PHYSICS.md 4): each mission is a short dynamic inspection
 episode; between missions the wear state advances quasi-statically by
 Archard's law from the episode's own load spectrum (the per-flank integrals
-of |T_tr| |omega_m|), times the acceleration factor ``accel``. A life ends at
+of |T_tr| |omega_m|), times the acceleration factor mission_hours * 3600 / duration. A life ends at
 the first mission whose starting mean flank wear reaches ``h_fail`` (that
 mission is still written: it is the failed state) or at ``n_missions``.
 Actuators are independent, so they run in parallel worker processes.
@@ -31,13 +31,13 @@ def bag_name(actuator_id: str, mission_index: int) -> str:
 
 
 def advance_health(health: Mapping[str, float], wear: Mapping[str, float], params: Mapping[str, Any],
-                   effects: EffectSet, mission_index: int) -> dict[str, float]:
+                   effects: EffectSet, mission_index: int, duration: float) -> dict[str, float]:
     """Health at the start of the next mission (quasi-static wear and fault growth)."""
     h = dict(health)
     lube = h.get("lube_loss", 0.0)
     if effects.is_on("meshing_wear"):
-        h["h_plus"] = h["h_plus"] + archard_increment(wear["W_plus"], params, lube)
-        h["h_minus"] = h["h_minus"] + archard_increment(wear["W_minus"], params, lube)
+        h["h_plus"] = h["h_plus"] + archard_increment(wear["W_plus"], params, duration, lube)
+        h["h_minus"] = h["h_minus"] + archard_increment(wear["W_minus"], params, duration, lube)
     for name, key in (("flexspline_stiffness_loss", "fs_loss"), ("lubrication_loss", "lube_loss")):
         if effects.is_on(name) and mission_index + 1 >= effects.p(name, "onset"):
             h[key] = min(h.get(key, 0.0) + effects.p(name, "rate"), 0.9)
@@ -47,8 +47,12 @@ def advance_health(health: Mapping[str, float], wear: Mapping[str, float], param
 def simulate_life(params: Mapping[str, Any], n_missions: int, out_dir: str | os.PathLike | None = None, *,
                   effects: EffectSet | None = None, duration: float = 20.0, fs: float = 1000.0,
                   seed: int = 0, profiles: Iterable[str] = PROFILE_MIX, n_sub: int = 40,
-                  stop_at_failure: bool = True, tick=None, write_sim: bool = True) -> list[dict[str, Any]]:
+                  stop_at_failure: bool = True, tick=None, sim_internal_every: int = 10) -> list[dict[str, Any]]:
     """One actuator's life; writes bags under ``out_dir/<actuator_id>/`` when given.
+
+    Every bag carries ``/sim/health`` and ``/sim/effects``; the bulky per-sample
+    ``/sim/internal`` goes into missions 0, k, 2k, ... (k = ``sim_internal_every``;
+    1 = all, 0 = none) and the last one, so a life stays a few hundred MB.
 
     Returns one record per mission: index, file, health at start, wear integrals.
     """
@@ -76,15 +80,21 @@ def simulate_life(params: Mapping[str, Any], n_missions: int, out_dir: str | os.
             from hd_bag import write_mission
 
             path = Path(out_dir) / aid / bag_name(aid, m)
-            write_mission(path, mission, sim=truth if write_sim else None)
+            k = int(sim_internal_every)
+            last = failed or m == n_missions - 1
+            sim = dict(truth)
+            if not (k > 0 and (m % k == 0 or last)):
+                sim.pop("internal")
+            write_mission(path, mission, sim=sim)
+            rec["has_internal"] = "internal" in sim
             rec["file"] = str(path.relative_to(out_dir))
         rows.append(rec)
         if tick is not None:
             tick()
         if failed and stop_at_failure:
             break
-        health = advance_health(health, truth["wear"], params, effects, m)
-        hours += float(params["accel"]) * duration / 3600.0
+        health = advance_health(health, truth["wear"], params, effects, m, duration)
+        hours += float(params["mission_hours"])
     return rows
 
 
@@ -106,7 +116,8 @@ def _init_worker(q):
 def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike, *, seed: int = 0,
                    effects: EffectSet | None = None, duration: float = 20.0, fs: float = 1000.0,
                    workers: int = 1, profiles: Iterable[str] = PROFILE_MIX, n_sub: int = 40,
-                   stop_at_failure: bool = True, progress: bool = True) -> dict[str, Any]:
+                   stop_at_failure: bool = True, progress: bool = True,
+                   sim_internal_every: int = 10) -> dict[str, Any]:
     """Simulate ``n_actuators`` lives of up to ``n_missions`` missions into ``out_dir``.
 
     Writes ``out_dir/<actuator_id>/<actuator_id>_mNNNN.mcap`` and
@@ -121,7 +132,7 @@ def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike
     effects = effects if effects is not None else EffectSet.default()
     pop = sample_population(n_actuators, seed)
     kw = dict(effects=effects, duration=duration, fs=fs, seed=seed, profiles=tuple(profiles), n_sub=n_sub,
-              stop_at_failure=stop_at_failure)
+              stop_at_failure=stop_at_failure, sim_internal_every=sim_internal_every)
     jobs = [(p, n_missions, str(out), kw) for p in pop]
     results: dict[str, list] = {}
     from tqdm import tqdm

@@ -65,7 +65,8 @@ NOMINAL: dict[str, tuple[float, str, str]] = {
     "R_ha": (1.0, "K/W", "housing-to-ambient"),
     # wear
     "k_D": (5.0e-18, "m^2/N", "Archard dimensional wear rate (median)"),
-    "accel": (2.0e3, "-", "wear acceleration factor between missions"),
+    "mission_hours": (140.0, "h", "operating hours one inspection mission stands for; wear acceleration "
+                      "factor = mission_hours * 3600 / duration (2.5e4 for 20 s missions)"),
     "delta_0": (2.0e-6, "m", "flexspline interference preload (consumed before backlash)"),
     "h_fail": (40e-6, "m", "failure threshold on mean flank wear (lost motion ~3.5 arcmin)"),
     "T_rated": (1200.0, "N*m", "rated output torque"),
@@ -149,7 +150,7 @@ def check_params(p: Mapping[str, Any]) -> None:
         "r_m": (0.005, 0.5), "r_b": (0.005, 0.5), "J_WG_plug": (1e-7, 1.0), "J_rotor": (0.0, 1.0),
         "J_CS": (1e-5, 10.0), "J_L": (0.0, 1e3), "m_FSx": (1e-4, 100.0), "m_FSy": (1e-3, 100.0),
         "K_aero": (0.0, 1e6), "k_t": (0.01, 20.0), "R0": (1e-3, 100.0), "L": (1e-6, 1.0),
-        "V_dc": (5.0, 2000.0), "i_max": (0.1, 2000.0), "k_D": (0.0, 1e-10), "accel": (0.0, 1e9),
+        "V_dc": (5.0, 2000.0), "i_max": (0.1, 2000.0), "k_D": (0.0, 1e-10), "mission_hours": (0.0, 1e5),
         "h_fail": (1e-7, 1e-3), "delta_0": (0.0, 1e-4), "split_mesh": (0.05, 0.9), "split_FS": (0.05, 0.9),
         "f_w": (1.0, 1000.0), "f_p": (0.1, 100.0), "f_i": (50.0, 1e4), "C_w": (1.0, 1e6), "C_h": (1.0, 1e7),
     }
@@ -168,12 +169,18 @@ def new_health() -> dict[str, float]:
     return {"h_plus": 0.0, "h_minus": 0.0, "fs_loss": 0.0, "lube_loss": 0.0}
 
 
-def archard_increment(W: float, p: Mapping[str, Any], lube_loss: float = 0.0) -> float:
+def archard_increment(W: float, p: Mapping[str, Any], duration: float, lube_loss: float = 0.0) -> float:
     """Accelerated wear depth [m] on one flank from the mission integral W = int |T_out||omega_m| dt [J].
+
+    The mission of ``duration`` s stands for ``mission_hours`` of operation with the same load
+    spectrum, so the acceleration factor is mission_hours * 3600 / duration.
 
     PHYSICS.md 4: h' = 2 f_WG k_D T/(r_m n_eff cos(alpha) b) with f_WG = |omega_m|/(2 pi), i.e.
     dh = k_D W / (pi r_m n_eff cos(alpha) b); times the acceleration factor, and x (1 + 4 s) under
     lubrication loss of severity s.
     """
     denom = math.pi * p["r_m"] * p["n_eff"] * math.cos(p["alpha_p"]) * p["b_face"]
-    return float(p["accel"] * p["k_D"] * (1.0 + 4.0 * lube_loss) * W / denom)
+    if duration <= 0:
+        raise ValueError(f"archard_increment: duration {duration} s <= 0")
+    accel = p["mission_hours"] * 3600.0 / duration
+    return float(accel * p["k_D"] * (1.0 + 4.0 * lube_loss) * W / denom)
