@@ -113,29 +113,41 @@ class OnnxTwinExpected:
 
     kind = "onnx_twin"
 
-    def __init__(self, model_dir: str, N: float | None = None):
+    def __init__(self, model_dir: str, N: float | None = None, fs_hz: float | None = None):
         try:
             from hd_twin.runtime import StreamingTwin
         except ImportError as e:  # the twin package has no runtime in this checkout
             raise ValueError(f"{model_dir}: cannot load the streaming twin runtime ({e})") from None
-        self.twin = StreamingTwin(model_dir)
+        self.twin = StreamingTwin(model_dir, fs_in=fs_hz, gear_ratio=N)
         self.model_dir = str(model_dir)
-        self.version = str(getattr(self.twin, "version", None) or getattr(self.twin, "model_version", None) or model_dir)
-        self.N = N
-        self._delay = 0
+        cfg = getattr(self.twin, "config", {}) or {}
+        self.version = str(cfg.get("version") or cfg.get("model_version") or model_dir)
+        self.N, self.fs = N, fs_hz
+        self._last = np.nan
+
+    def configure(self, fs_hz: float | None = None, N: float | None = None) -> None:
+        """Input rate [Hz] and gear ratio of the actuator now monitored (then reset)."""
+        self.fs = fs_hz or self.fs
+        self.N = N or self.N
+        self.reset()
 
     def reset(self) -> None:
-        self.twin.reset()
+        self.twin.reset(self.fs, self.N)
+        self._last = np.nan
 
     def step(self, t: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """Q_red_hat per input sample; a decimating twin's outputs are held (zero-order) in between."""
         out = self.twin.step(X)
-        out = out.get("Q_red") if isinstance(out, dict) else out
-        out = np.asarray(out, dtype=float)
-        if out.ndim == 2:
-            out = out[:, 0]
-        if len(out) != len(X):
-            raise ValueError(f"{self.model_dir}: streaming twin returned {len(out)} outputs for {len(X)} inputs")
-        return out
+        q = np.asarray(out["Q_red"], dtype=float)
+        idx = np.asarray(out.get("index", np.arange(len(q))), dtype=np.int64)
+        full = np.full(len(X), np.nan)
+        full[idx] = q
+        ok = np.isfinite(full)
+        pos = np.maximum.accumulate(np.where(ok, np.arange(len(X)), -1))
+        res = np.where(pos >= 0, full[np.maximum(pos, 0)], self._last)
+        if len(res):
+            self._last = float(res[-1])
+        return res
 
 
 def make_expected(model_dir: str | None, params: ph.TwinParams, effects=ph.DEFAULT_EFFECTS,
@@ -143,7 +155,7 @@ def make_expected(model_dir: str | None, params: ph.TwinParams, effects=ph.DEFAU
     """The ONNX twin when ``model_dir`` is given and loads, else the physics-only stand-in (logged)."""
     if model_dir:
         try:
-            return OnnxTwinExpected(model_dir)
+            return OnnxTwinExpected(model_dir, N=params.N, fs_hz=fs_hz)
         except Exception as e:  # noqa: BLE001 - any load failure falls back, loudly
             if log:
                 log(f"twin model {model_dir!r} not usable ({e}); using the physics-only stand-in")

@@ -1,0 +1,352 @@
+"""Onboard node (real-time module): contract topics in; residuals, flags, features out.
+
+A thin rclpy shell over :class:`hd_onboard.core.OnboardCore`. Subscriptions
+take raw CDR and drain their whole queue per callback, so the core sees
+blocks (see ``hdphm.rosutil.take_all``).
+
+Subscribes: ``/hd/joint_states``, ``/hd/command``, ``/hd/temperature``
+(sensor QoS), ``/hd/mission`` (JSON ``hd_mission`` metadata, latched: a new
+mission resets the core; hardware_id = its actuator_id), ``/hd/twin/state``
+(latched JSON: twin parameters, model version, per-actuator thresholds).
+Publishes: ``/hd/onboard/residuals`` (Float64MultiArray rows, columns
+``hd_onboard.core.RESIDUAL_COLUMNS``, one message per processed block),
+``/hd/onboard/features`` (one row per closed window: residual statistics and
+features), ``/diagnostics`` (stable names ``hdphm/onboard/...``, see
+``docs/INTERFACES.md``) on every level change and every
+``diag_period_s`` of sample time, and STALE when joint states stop for
+``stale_timeout_s`` of wall time (temperature / command are STALE when
+joint-state time advanced ``stale_timeout_s`` past their last sample).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from hdphm import rosutil as ru
+
+NODE_NAME = "onboard"
+
+PARAMS: dict[str, Any] = {
+    "actuator_id": "",  # hardware_id until /hd/mission says otherwise ("" -> header.frame_id or "unknown")
+    "gear_ratio": 0.0,  # N; 0 -> from /hd/mission or the twin parameters
+    "model_dir": "",  # trained twin (ONNX); "" -> physics-only stand-in
+    "window_s": 1.0,
+    "ewma_tau_s": 0.1,
+    "persistence_s": 0.05,
+    "hold_s": 2.0,
+    "warmup_s": 5.0,
+    "settle_s": 0.05,
+    "max_gap_samples": 10,
+    "nominal_fs": 0.0,
+    "accel_cutoff_hz": 50.0,
+    "default_h_warn": 3.0,
+    "default_h_error": 6.0,
+    "diag_period_s": 0.5,  # s of sample time between periodic /diagnostics
+    "stale_timeout_s": 2.0,  # s
+    "max_block": 2000,  # samples per core call
+}
+
+
+def declare(node, params: dict[str, Any]) -> dict[str, Any]:
+    """Declare ``params`` (name -> default) on ``node`` and return their current values."""
+    out = {}
+    for k, v in params.items():
+        out[k] = node.declare_parameter(k, v).value
+    return out
+
+
+def diag_status(name: str, level: int, message: str, hardware_id: str, values: dict[str, Any]):
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    s = DiagnosticStatus()
+    s.name, s.level, s.message, s.hardware_id = name, bytes([int(level)]), message, hardware_id
+    s.values = [KeyValue(key=str(k), value=_fmt(v)) for k, v in values.items()]
+    return s
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else "nan"
+    return str(v)
+
+
+def make_node(context=None, overrides: dict[str, Any] | None = None):
+    """Build the onboard node (rclpy Node subclass instance)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import JointState, Temperature
+    from std_msgs.msg import Float64MultiArray, String
+
+    from hd_onboard.core import CHANNELS, RESIDUAL_COLUMNS, OnboardConfig, OnboardCore
+    from hd_onboard.detector import LEVEL_NAMES, ChannelThreshold, OK, STALE
+    from hd_onboard.expected import make_expected
+    from hd_twin import physics as ph
+
+    class OnboardNode(Node):
+        def __init__(self):
+            po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
+            super().__init__(NODE_NAME, context=context, parameter_overrides=po)
+            self.p = declare(self, PARAMS)
+            self.cfg = OnboardConfig(**{k: self.p[k] for k in OnboardConfig.__dataclass_fields__ if k in self.p}).validate()
+            self.twin_params = ph.TwinParams.from_yaml()
+            self.twin_state: dict = {}
+            self.thresholds_all: dict[str, dict[str, ChannelThreshold]] = {}
+            self.hardware_id = self.p["actuator_id"] or ""
+            self.meta: dict = {}
+            self.core = None
+            self.n_msgs = {t: 0 for t in ru.CONTRACT_TOPICS}
+            self.n_bad = 0
+            self.last_wall = {t: None for t in ru.CONTRACT_TOPICS}
+            self.last_stamp = {t: None for t in ru.CONTRACT_TOPICS}
+            self.last_diag_t = -math.inf
+            self.level = OK
+            self.latency_s: list[float] = []  # arrival -> flag decision, per block (bench)
+            self.n_published = {ru.TOPIC_RESIDUALS: 0, ru.TOPIC_FEATURES: 0, ru.TOPIC_DIAGNOSTICS: 0}
+            self.errors: list[str] = []
+            self.flags: list[tuple[str, int, int, str]] = []  # (actuator, stamp_ns, level, reason)
+            self.pub_res = self.create_publisher(Float64MultiArray, ru.TOPIC_RESIDUALS, ru.topic_qos(ru.TOPIC_RESIDUALS))
+            self.pub_feat = self.create_publisher(Float64MultiArray, ru.TOPIC_FEATURES, ru.topic_qos(ru.TOPIC_FEATURES))
+            self.pub_diag = self.create_publisher(DiagnosticArray, ru.TOPIC_DIAGNOSTICS, ru.qos("diagnostics"))
+            self.sub_js = self.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js, ru.qos("sensor"), raw=True)
+            self.sub_cmd = self.create_subscription(JointState, ru.TOPIC_COMMAND, self._on_cmd, ru.qos("sensor"), raw=True)
+            self.sub_tmp = self.create_subscription(Temperature, ru.TOPIC_TEMPERATURE, self._on_temp, ru.qos("sensor"), raw=True)
+            self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.qos("latched"))
+            self.create_subscription(String, ru.TOPIC_TWIN_STATE, self._on_twin, ru.qos("latched"))
+            self.create_timer(max(0.1, self.p["stale_timeout_s"] / 4), self._on_timer)
+            self._new_core()
+            self.get_logger().info(f"onboard up: twin={self.core.expected.kind} {self.core.expected.version}")
+
+        # ---- core management --------------------------------------------------
+        def _new_core(self):
+            N = float(self.meta.get("gear_ratio") or self.p["gear_ratio"] or self.twin_params.N)
+            params = self.twin_params.with_meta(gear_ratio=N)
+            model_dir = self.twin_state.get("model_dir") or self.p["model_dir"]
+            exp = make_expected(model_dir, params, fs_hz=self.cfg.nominal_fs or 1000.0,
+                                log=lambda s: self.get_logger().warning(s))
+            self.core = OnboardCore(exp, params, None, self.thresholds_all.get(self.hardware_id), self.cfg,
+                                    feature_fn=_feature_fn(self.meta, N))
+            self.last_diag_t = -math.inf
+            self.level = OK
+
+        def _on_mission(self, msg):
+            try:
+                meta = ru.parse_json_msg(msg, ru.TOPIC_MISSION)
+                float(meta.get("gear_ratio", "nan"))
+            except (ValueError, TypeError) as e:
+                self._error(f"{ru.TOPIC_MISSION}: {e}")
+                return
+            self._close_mission()
+            self.meta = meta
+            self.hardware_id = str(meta.get("actuator_id") or self.hardware_id or "unknown")
+            self._new_core()
+            self.get_logger().info(f"mission {meta.get('mission_index')} of {self.hardware_id}: core reset")
+
+        def _close_mission(self):
+            if self.core is not None:
+                w = self.core.flush()
+                if w:
+                    self._publish_windows(w)
+
+        def _on_twin(self, msg):
+            try:
+                st = ru.parse_json_msg(msg, ru.TOPIC_TWIN_STATE)
+                params = ph.TwinParams.from_dict(st.get("params", {}), where=ru.TOPIC_TWIN_STATE) if st.get("params") else self.twin_params
+                ths = {}
+                for act, chans in (st.get("thresholds") or {}).items():
+                    ths[act] = {c: ChannelThreshold.from_dict(v, f"{ru.TOPIC_TWIN_STATE} thresholds[{act}][{c}]")
+                                for c, v in chans.items() if c in CHANNELS}
+            except ValueError as e:
+                self._error(f"twin update refused: {e}")
+                return
+            model_changed = (st.get("model_dir") or "") != (self.twin_state.get("model_dir") or "")
+            self.twin_state, self.twin_params, self.thresholds_all = st, params, ths
+            if model_changed and self.core is not None and self.core.last_ns is None:
+                self._new_core()
+            elif self.core is not None:
+                self.core.set_params(params)
+                if self.hardware_id in ths:
+                    self.core.set_thresholds(ths[self.hardware_id])
+            self.get_logger().info(f"twin state revision {st.get('revision')} applied")
+
+        def _error(self, text: str):
+            self.errors.append(text)
+            self.get_logger().error(text)
+            self._publish_diag([diag_status("hdphm/onboard/input", 2, text[:200], self.hardware_id or "unknown", {})])
+
+        # ---- inputs -----------------------------------------------------------
+        def _on_js(self, first):
+            t_arrival = time.perf_counter()
+            msgs = ru.take_all(self.sub_js, first)
+            n = len(msgs)
+            stamps = np.empty(n, np.int64)
+            V = np.full((n, 6), np.nan)
+            ok = np.ones(n, bool)
+            for i, b in enumerate(msgs):
+                try:
+                    s, frame, names, pos, vel, eff = ru.decode_joint_state(b)
+                except ru.CdrError as e:
+                    ok[i] = False
+                    self.n_bad += 1
+                    if self.n_bad <= 3:
+                        self._error(f"{ru.TOPIC_JOINT_STATES}: {e}")
+                    continue
+                stamps[i] = s
+                if len(pos) >= 2:
+                    V[i, 0:2] = pos[:2]
+                if len(vel) >= 2:
+                    V[i, 2:4] = vel[:2]
+                if len(eff) >= 2:
+                    V[i, 4:6] = eff[:2]
+                if not self.hardware_id and frame:
+                    self.hardware_id = frame
+            if not ok.all():
+                stamps, V = stamps[ok], V[ok]
+            if not self.hardware_id:
+                self.hardware_id = "unknown"
+            self.n_msgs[ru.TOPIC_JOINT_STATES] += len(stamps)
+            self.last_wall[ru.TOPIC_JOINT_STATES] = time.monotonic()
+            mb = int(self.p["max_block"])
+            for a in range(0, len(stamps), mb):
+                self._process(stamps[a:a + mb], V[a:a + mb])
+            self.latency_s.append(time.perf_counter() - t_arrival)
+
+        def _process(self, stamps, V):
+            core = self.core
+            r = core.push(stamps, V)
+            if len(r.table):
+                self.last_stamp[ru.TOPIC_JOINT_STATES] = int(stamps[-1])
+                self.pub_res.publish(ru.pack_table(RESIDUAL_COLUMNS, r.table))
+                self.n_published[ru.TOPIC_RESIDUALS] += 1
+            for s, lev, why in r.events:
+                self.flags.append((self.hardware_id, s, lev, why))
+                self.get_logger().warning(f"{self.hardware_id}: {LEVEL_NAMES[lev]} at stamp {s * 1e-9:.3f} s ({why})")
+            if r.windows:
+                self._publish_windows(r.windows)
+            t_now = core.last_ns * 1e-9 if core.last_ns is not None else 0.0
+            if r.level != self.level or t_now - self.last_diag_t >= self.p["diag_period_s"]:
+                self.level = r.level
+                self.last_diag_t = t_now
+                self._publish_status()
+
+        def _publish_windows(self, windows):
+            keys = sorted({k for w in windows for k in w})
+            rows = np.array([[float(w.get(k, math.nan)) for k in keys] for w in windows])
+            self.pub_feat.publish(ru.pack_table(keys, rows))
+            self.n_published[ru.TOPIC_FEATURES] += 1
+
+        def _on_cmd(self, first):
+            for b in ru.take_all(self.sub_cmd, first):
+                try:
+                    s, _, _, pos, _, _ = ru.decode_joint_state(b)
+                except ru.CdrError as e:
+                    self._error(f"{ru.TOPIC_COMMAND}: {e}")
+                    continue
+                self.n_msgs[ru.TOPIC_COMMAND] += 1
+                self.last_stamp[ru.TOPIC_COMMAND] = s
+                if len(pos):
+                    self.core.push_command(s, float(pos[0]))
+            self.last_wall[ru.TOPIC_COMMAND] = time.monotonic()
+
+        def _on_temp(self, first):
+            for b in ru.take_all(self.sub_tmp, first):
+                try:
+                    s, frame, v = ru.decode_temperature(b)
+                except ru.CdrError as e:
+                    self._error(f"{ru.TOPIC_TEMPERATURE}: {e}")
+                    continue
+                self.n_msgs[ru.TOPIC_TEMPERATURE] += 1
+                self.last_stamp[ru.TOPIC_TEMPERATURE] = s
+                if frame == "gearbox" or self.meta.get("_temp_frame") in (None, frame):
+                    self.meta["_temp_frame"] = frame
+                    self.core.push_temperature(s, v)
+            self.last_wall[ru.TOPIC_TEMPERATURE] = time.monotonic()
+
+        # ---- diagnostics ------------------------------------------------------
+        def _input_status(self, topic, stale_js: bool):
+            name = "hdphm/onboard/input" + topic[3:].replace("/", "_").replace("_", "/", 1)
+            js_last = self.last_stamp[ru.TOPIC_JOINT_STATES]
+            last = self.last_stamp[topic]
+            n = self.n_msgs[topic]
+            vals = {"messages": n}
+            if topic == ru.TOPIC_JOINT_STATES:
+                h = self.core.health
+                vals.update(samples=h.n_samples, dropped_out_of_order=h.n_dropped_order, nan_samples=h.n_nan,
+                            gaps=h.n_gaps, missing_samples=h.n_missing, twin_resets=h.n_resets, undecodable=self.n_bad)
+                if stale_js:
+                    return diag_status(name, STALE, f"no joint states for {self.p['stale_timeout_s']} s", self.hardware_id, vals)
+                lev = 1 if (h.n_nan or h.n_gaps or h.n_dropped_order or self.n_bad) else 0
+                msg = "ok" if not lev else "conditioning active (NaN / gaps / out-of-order, see values)"
+                return diag_status(name, lev, msg, self.hardware_id, vals)
+            if js_last is not None and (last is None or (js_last - last) * 1e-9 > self.p["stale_timeout_s"]):
+                return diag_status(name, STALE, "missing" if last is None else "stale (joint-state time moved on)", self.hardware_id, vals)
+            return diag_status(name, 0, "ok", self.hardware_id, vals)
+
+        def _publish_status(self, stale_js: bool = False):
+            core = self.core
+            hid = self.hardware_id or "unknown"
+            sts = []
+            for c, d in core.detectors.items():
+                th = d.threshold
+                lev_c = 0
+                if np.isfinite(d.e) and abs(d.e) > th.h_error:
+                    lev_c = 2
+                elif np.isfinite(d.e) and abs(d.e) > th.h_warn:
+                    lev_c = 1
+                sts.append(diag_status(f"hdphm/onboard/residual/{c}", lev_c, "calibrating" if not core.calibrated else LEVEL_NAMES[lev_c], hid,
+                                       {"ewma": d.e, "h_warn": th.h_warn, "h_error": th.h_error, "mu": th.mu, "sigma": th.sigma,
+                                        "threshold_source": th.source}))
+            lev = STALE if stale_js else core.level
+            msg = LEVEL_NAMES[lev] if core.onset_ns is None else f"{LEVEL_NAMES[lev]}; first flag at stamp {core.onset_ns * 1e-9:.3f}"
+            sts.insert(0, diag_status("hdphm/onboard/fault", lev, msg, hid,
+                                      {"mission_index": self.meta.get("mission_index", ""), "twin": core.expected.kind,
+                                       "twin_version": core.expected.version, "onset_stamp_s": (core.onset_ns or 0) * 1e-9}))
+            for t in ru.CONTRACT_TOPICS:
+                sts.append(self._input_status(t, stale_js))
+            self._publish_diag(sts)
+
+        def _publish_diag(self, statuses):
+            a = DiagnosticArray()
+            a.header.stamp = self.get_clock().now().to_msg()
+            a.status = statuses
+            self.pub_diag.publish(a)
+            self.n_published[ru.TOPIC_DIAGNOSTICS] += 1
+
+        def _on_timer(self):
+            lw = self.last_wall[ru.TOPIC_JOINT_STATES]
+            if lw is not None and time.monotonic() - lw > self.p["stale_timeout_s"]:
+                if not getattr(self, "_stale", False):
+                    self._stale = True
+                    self._close_mission_windows_only()
+                self._publish_status(stale_js=True)
+            else:
+                self._stale = False
+
+        def _close_mission_windows_only(self):
+            w = self.core.flush()
+            if w:
+                self._publish_windows(w)
+
+    return OnboardNode()
+
+
+def _feature_fn(meta: dict, N: float):
+    """Window features from ``hd_onboard.features.block_features`` (None when that module is unavailable)."""
+    try:
+        from hd_onboard.features import block_features
+    except ImportError:
+        return None
+    k_t = float(meta.get("torque_constant") or 0.3)
+
+    def fn(stamps_s, V, core):
+        t = stamps_s - stamps_s[0]
+        temp = np.full(len(t), core.temperature)
+        f = block_features(t, V[:, 0], V[:, 1], V[:, 2], V[:, 3], V[:, 4], V[:, 5], N, k_t,
+                           temp if np.isfinite(core.temperature) else None, None, None, "onboard window")
+        return {k: v for k, v in f.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+
+    return fn

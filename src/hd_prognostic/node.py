@@ -1,0 +1,205 @@
+"""Prognostic node (partially real-time module): features in; health indicator and RUL out, at a lower rate.
+
+Subscribes ``/hd/onboard/features`` (window rows: ``feat.HF_MTW_IF``,
+``feat.W_load`` and residual statistics), ``/hd/mission`` (mission
+boundaries). Per actuator it keeps one particle filter of the Archard wear
+model (``hd_prognostic.hd.build_model`` on the observation model file,
+parameter ``obs_model``; default ``hd_prognostic/default_obs_model.json``)
+and makes **one filter step per mission**, as the batch prognosis does: the
+mission's observation is the median of its window ``HF_MTW_IF`` values, its
+exposure the sum of the window load-sliding integrals ``W_load`` [J].
+During a mission, every ``publish_period_s`` of wall time, it publishes a
+provisional estimate (a copy of the filter updated with the mission so far).
+
+Publishes ``/hd/prognostic/health`` (Float64MultiArray row, columns
+:data:`HEALTH_COLUMNS`: health indicator h [m] mean/P5/P95, RUL P5/P50/P95
+in missions, risk of failure within ``risk_horizon`` missions, the
+observation used) and ``/diagnostics`` ``hdphm/prognostic`` per actuator.
+Without an observation model the node still publishes the observed
+indicator and reports RUL as NaN with a WARN saying why.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hdphm import rosutil as ru
+
+NODE_NAME = "prognostic"
+HEALTH_COLUMNS = ("stamp", "mission_index", "final", "h_mean", "h_p5", "h_p95", "rul_p5", "rul_p50", "rul_p95",
+                  "risk", "observation", "n_windows")
+PARAMS: dict[str, Any] = {
+    "obs_model": "",  # ObservationModel JSON; "" -> hd_prognostic/default_obs_model.json when present
+    "n_particles": 1000,
+    "rul_particles": 500,
+    "max_missions": 2000,
+    "risk_horizon": 10.0,  # missions
+    "publish_period_s": 1.0,
+    "seed": 0,
+}
+
+
+class ActuatorTracker:
+    """Per-actuator mission-step particle filter (pure; the node feeds it)."""
+
+    def __init__(self, actuator: str, obs, p: dict[str, Any]):
+        self.actuator = actuator
+        self.obs = obs
+        self.p = p
+        self.model = None
+        self.pf = None
+        self.y_hist: list[float] = []
+        self.W_hist: list[float] = []
+        self.W_prev = 0.0
+        self.mission_index = math.nan
+        self.windows: list[dict] = []
+        if obs is not None:
+            from hd_prognostic.hd import build_model
+            from hd_prognostic.pf import ParticleFilter
+
+            self.model = build_model(obs)
+            self.pf = ParticleFilter(self.model, n_particles=int(p["n_particles"]), seed=int(p["seed"]),
+                                     likelihood="student_t", roughening=0.05)
+
+    def add_windows(self, rows: list[dict]) -> None:
+        self.windows.extend(rows)
+
+    def _mission_obs(self) -> tuple[float, float]:
+        hf = np.array([w.get("feat.HF_MTW_IF", math.nan) for w in self.windows], float)
+        W = np.array([w.get("feat.W_load", math.nan) for w in self.windows], float)
+        y = float(np.nanmedian(hf)) if np.isfinite(hf).any() else math.nan
+        Wm = float(np.nansum(W)) if np.isfinite(W).any() else math.nan
+        return y, Wm
+
+    def estimate(self, final: bool) -> dict[str, float]:
+        """Step (final: commit the mission) or provisional estimate (on a copy)."""
+        y, W = self._mission_obs()
+        out = {"mission_index": self.mission_index, "final": float(final), "observation": y,
+               "n_windows": float(len(self.windows))}
+        if self.pf is None:
+            out.update(h_mean=math.nan, h_p5=math.nan, h_p95=math.nan, rul_p5=math.nan, rul_p50=math.nan,
+                       rul_p95=math.nan, risk=math.nan)
+            if final:
+                self.windows = []
+            return out
+        pf = self.pf if final else copy.deepcopy(self.pf)
+        ys = self.obs.normalise(np.array(self.y_hist + [y]))
+        z = float(ys[-1])
+        pf.predict(self.W_prev)
+        pf.update(z if np.isfinite(z) else math.nan)
+        from hd_prognostic.pf import weighted_quantile
+        from hd_prognostic.rul import rul_distribution
+
+        w = pf.weights
+        h = pf.x[:, 0]
+        q = weighted_quantile(h, w, [0.05, 0.5, 0.95])
+        past = np.array([v for v in self.W_hist + [W] if np.isfinite(v) and v > 0])
+        fut = past if len(past) >= 3 else float(self.obs.degradation.get("W_median", W if np.isfinite(W) else 1.0))
+        k = min(int(self.p["rul_particles"]), pf.n)
+        sel = np.random.default_rng(0).choice(pf.n, size=k, p=w / w.sum())
+        r = rul_distribution(self.model, pf.x[sel], None, future=fut, step=1.0, max_steps=int(self.p["max_missions"]))
+        out.update(h_mean=float(np.sum(w * h) / np.sum(w)), h_p5=float(q[0]), h_p95=float(q[2]),
+                   rul_p5=r.p5, rul_p50=r.p50, rul_p95=r.p95, risk=float(r.risk(self.p["risk_horizon"])[0]))
+        if final:
+            self.y_hist.append(y)
+            self.W_hist.append(W)
+            self.W_prev = W if np.isfinite(W) else (float(np.median(past)) if len(past) else 0.0)
+            self.windows = []
+        return out
+
+
+def load_obs_model(path: str):
+    from hd_prognostic.observation import ObservationModel
+
+    if not path:
+        cand = Path(__file__).with_name("default_obs_model.json")
+        if not cand.is_file():
+            return None, f"no observation model ({cand.name} absent; set parameter obs_model)"
+        path = str(cand)
+    try:
+        return ObservationModel.from_json(path), ""
+    except (OSError, ValueError, KeyError) as e:
+        return None, f"{path}: observation model unusable ({e})"
+
+
+def make_node(context=None, overrides: dict[str, Any] | None = None):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import Float64MultiArray, String
+
+    from hd_onboard.node import declare, diag_status
+
+    class PrognosticNode(Node):
+        def __init__(self):
+            po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
+            super().__init__(NODE_NAME, context=context, parameter_overrides=po)
+            self.p = declare(self, PARAMS)
+            self.obs, self.obs_problem = load_obs_model(self.p["obs_model"])
+            if self.obs_problem:
+                self.get_logger().warning(self.obs_problem)
+            self.trackers: dict[str, ActuatorTracker] = {}
+            self.current: str | None = None
+            self.last: dict[str, dict] = {}
+            self.n_published = 0
+            self.pub = self.create_publisher(Float64MultiArray, ru.TOPIC_HEALTH, ru.topic_qos(ru.TOPIC_HEALTH))
+            self.pub_diag = self.create_publisher(DiagnosticArray, ru.TOPIC_DIAGNOSTICS, ru.qos("diagnostics"))
+            self.create_subscription(Float64MultiArray, ru.TOPIC_FEATURES, self._on_features, ru.topic_qos(ru.TOPIC_FEATURES))
+            self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.qos("latched"))
+            self.create_timer(float(self.p["publish_period_s"]), self._on_timer)
+            self._dirty = False
+
+        def _tracker(self, act: str) -> ActuatorTracker:
+            if act not in self.trackers:
+                self.trackers[act] = ActuatorTracker(act, self.obs, self.p)
+            return self.trackers[act]
+
+        def _on_mission(self, msg):
+            try:
+                meta = ru.parse_json_msg(msg, ru.TOPIC_MISSION)
+            except ValueError as e:
+                self.get_logger().error(str(e))
+                return
+            if self.current is not None and self.trackers[self.current].windows:
+                self._publish(self.current, self.trackers[self.current].estimate(final=True))
+            self.current = str(meta.get("actuator_id", "unknown"))
+            tr = self._tracker(self.current)
+            try:
+                tr.mission_index = float(meta.get("mission_index", "nan"))
+            except ValueError:
+                tr.mission_index = math.nan
+
+        def _on_features(self, msg):
+            try:
+                cols, rows = ru.unpack_table(msg)
+            except ValueError as e:
+                self.get_logger().error(f"{ru.TOPIC_FEATURES}: {e}")
+                return
+            act = self.current or "unknown"
+            self._tracker(act).add_windows([dict(zip(cols, r.tolist())) for r in rows])
+            self._dirty = True
+
+        def _on_timer(self):
+            if self._dirty and self.current is not None:
+                self._dirty = False
+                self._publish(self.current, self.trackers[self.current].estimate(final=False))
+
+        def _publish(self, act: str, est: dict):
+            est = dict(est, stamp=time.time())
+            self.last[act] = est
+            self.pub.publish(ru.pack_table(HEALTH_COLUMNS, np.array([[float(est.get(c, math.nan)) for c in HEALTH_COLUMNS]])))
+            self.n_published += 1
+            lev = 1 if self.obs is None else (2 if est.get("risk", 0) > 0.5 else 1 if est.get("risk", 0) > 0.1 else 0)
+            msg = self.obs_problem or f"RUL P50 {est['rul_p50']:.1f} missions (P5 {est['rul_p5']:.1f}, P95 {est['rul_p95']:.1f})"
+            a = DiagnosticArray()
+            a.header.stamp = self.get_clock().now().to_msg()
+            a.status = [diag_status("hdphm/prognostic", lev, msg, act, est)]
+            self.pub_diag.publish(a)
+
+    return PrognosticNode()

@@ -1,0 +1,632 @@
+"""``hdphm node | stack | replay | record``: the running ROS 2 stack from the shell, plus its Python API.
+
+* ``hdphm node onboard|prognostic|ground|twin [--ros-args -p name:=value ...]``
+  runs one node; its parameters come from ``ros2_ws/config/<node>.yaml``
+  (a standard ROS 2 params file) and then from ``--ros-args``, parsed by
+  rclpy itself.
+* ``hdphm stack`` runs all four nodes **in one process** on one
+  SingleThreadedExecutor: Python nodes of this size share one core well,
+  the latched twin state is delivered without discovery latency, and one
+  process is simpler to supervise on an actuator computer. For isolation
+  (a crashing ground analysis must not stop the onboard monitor) run
+  ``hdphm node ...`` per process instead: the topics and QoS are the same.
+* ``hdphm replay BAG... [--rate 1.0|max]`` publishes the contract topics
+  with their original header stamps (the payload bytes of the bag are
+  published as they are) and the bag's ``hd_mission`` metadata on
+  ``/hd/mission`` before each bag.
+* ``hdphm record --out FILE.mcap`` records every ``/hd/...``,
+  ``/diagnostics`` and stack topic; chunks are flushed every
+  ``--flush-s`` seconds, so a recorder killed mid-run leaves a readable
+  file with everything before the last flush.
+
+:func:`run_stack_on_bags` is the in-process API the demo uses: replay bags
+through all four nodes with a recorder, lossless at any rate.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+NODES = ("onboard", "prognostic", "ground", "twin")
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "ros2_ws" / "config"
+
+
+# --------------------------------------------------------------------------
+# building nodes
+# --------------------------------------------------------------------------
+def make_node(name: str, context=None, overrides: dict[str, Any] | None = None):
+    """Instantiate one of the four stack nodes by name."""
+    if name == "onboard":
+        from hd_onboard.node import make_node as mk
+    elif name == "twin":
+        from hd_twin.node import make_node as mk
+    elif name == "prognostic":
+        from hd_prognostic.node import make_node as mk
+    elif name == "ground":
+        from hd_ground.node import make_node as mk
+    else:
+        raise ValueError(f"unknown node {name!r}; one of {', '.join(NODES)}")
+    return mk(context=context, overrides=overrides)
+
+
+def ros_args_for(name: str, extra: list[str] | None) -> list[str]:
+    """rclpy args: the node's YAML params file (if present) then the user's ``--ros-args`` tail."""
+    args = ["hdphm"]
+    cfg = CONFIG_DIR / f"{name}.yaml"
+    if cfg.is_file():
+        args += ["--ros-args", "--params-file", str(cfg)]
+    if extra:
+        if extra[0] != "--ros-args":
+            extra = ["--ros-args"] + extra
+        args += extra
+    return args
+
+
+# --------------------------------------------------------------------------
+# replay
+# --------------------------------------------------------------------------
+class BagSource:
+    """Contract messages of one bag as raw CDR payloads in log-time order (streamed chunk by chunk)."""
+
+    def __init__(self, path: str | os.PathLike):
+        from hd_bag.mcapio import McapFormatError, McapScan, scan_mcap  # noqa: F401
+
+        self.path = os.fspath(path)
+        if not os.path.isfile(self.path):
+            raise ValueError(f"{self.path}: no such bag file")
+        self.scan = McapScan()
+        self._it = scan_mcap(self.path, self.scan)
+        self.meta: dict[str, str] | None = None
+
+    def blocks(self) -> Iterable[tuple[list[str], np.ndarray, list[bytes]]]:
+        """Yield (topics, log_time_ns, payloads) per chunk, sorted by log time; contract topics only."""
+        from hd_bag.mcapio import McapFormatError
+        from hdphm.rosutil import CONTRACT_TOPICS
+
+        try:
+            for blk in self._it:
+                if self.meta is None:
+                    self.meta = self.scan.metadata.get("hd_mission")
+                chans = self.scan.channels
+                topic_of = {cid: c.topic for cid, c in chans.items()}
+                sel = np.array([topic_of.get(int(c)) in CONTRACT_TOPICS for c in blk.channel], bool)
+                if not sel.any():
+                    continue
+                idx = np.flatnonzero(sel)
+                idx = idx[np.argsort(blk.log_time[idx], kind="stable")]
+                b = blk.buf
+                pay = [b[s:s + n].tobytes() for s, n in zip(blk.start[idx].tolist(), blk.length[idx].tolist())]
+                yield [topic_of[int(c)] for c in blk.channel[idx]], blk.log_time[idx].astype(np.int64), pay
+        except McapFormatError as e:
+            raise ValueError(f"{self.path}: {e}") from None
+        if self.meta is None:
+            self.meta = self.scan.metadata.get("hd_mission")
+
+
+class Replayer:
+    """Publishes bags on the contract topics (+ ``/hd/mission``) from an rclpy node.
+
+    ``rate``: a float (1.0 = real time, by log time) or ``"max"``.
+    ``pump`` (in-process use) is called after every ``batch`` messages to let
+    the subscribers in the same executor drain (lossless max-rate replay);
+    across processes the reliable keep-all QoS and ``wait_for_all_acked``
+    provide the back-pressure.
+    """
+
+    def __init__(self, node, rate: float | str = 1.0, batch: int = 200, pump=None):
+        from rclpy.qos import QoSProfile  # noqa: F401
+        from sensor_msgs.msg import JointState, Temperature
+        from std_msgs.msg import String
+
+        from hdphm import rosutil as ru
+
+        self.node = node
+        self.rate = rate if rate == "max" else float(rate)
+        if self.rate != "max" and not (0 < self.rate < 1e4):
+            raise ValueError(f"replay rate {rate!r} must be > 0 (or 'max')")
+        self.batch = int(batch)
+        self.pump = pump
+        self.pubs = {
+            ru.TOPIC_JOINT_STATES: node.create_publisher(JointState, ru.TOPIC_JOINT_STATES, ru.qos("sensor")),
+            ru.TOPIC_COMMAND: node.create_publisher(JointState, ru.TOPIC_COMMAND, ru.qos("sensor")),
+            ru.TOPIC_TEMPERATURE: node.create_publisher(Temperature, ru.TOPIC_TEMPERATURE, ru.qos("sensor")),
+        }
+        self.pub_mission = node.create_publisher(String, ru.TOPIC_MISSION, ru.qos("latched"))
+        self.counts = {t: 0 for t in self.pubs}
+        self.n_mission = 0
+        self.sample_seconds = 0.0
+
+    def play(self, path, skip_topics: Iterable[str] = (), transform=None) -> dict:
+        """Replay one bag; returns per-topic counts. ``transform(topic, log_ns, payload)`` may edit or drop (None)."""
+        from hdphm import rosutil as ru
+
+        src = BagSource(path)
+        skip = set(skip_topics)
+        t_wall0 = None
+        t_log0 = None
+        counts = {t: 0 for t in self.pubs}
+        sent_meta = False
+        since_pump = 0
+        first_ns = last_ns = None
+        for topics, lt, pays in src.blocks():
+            if not sent_meta:
+                meta = dict(src.meta or {})
+                meta.setdefault("bag", str(path))
+                self.pub_mission.publish(ru.json_msg(meta))
+                self.n_mission += 1
+                sent_meta = True
+                if self.pump:
+                    self.pump(force=True)
+            for topic, ln, pay in zip(topics, lt.tolist(), pays):
+                if topic in skip:
+                    continue
+                if transform is not None:
+                    r = transform(topic, ln, pay)
+                    if r is None:
+                        continue
+                    pay = r
+                if self.rate != "max":
+                    if t_wall0 is None:
+                        t_wall0, t_log0 = time.monotonic(), ln
+                    delay = (ln - t_log0) * 1e-9 / self.rate - (time.monotonic() - t_wall0)
+                    if delay > 0:
+                        if self.pump:
+                            self.pump(timeout=delay)
+                        else:
+                            time.sleep(delay)
+                self.pubs[topic].publish(pay)
+                counts[topic] += 1
+                self.counts[topic] += 1
+                first_ns = ln if first_ns is None else first_ns
+                last_ns = ln
+                since_pump += 1
+                if since_pump >= self.batch:
+                    since_pump = 0
+                    if self.pump:
+                        self.pump()
+                    elif self.rate == "max":
+                        for p in self.pubs.values():
+                            p.wait_for_all_acked()
+        if not sent_meta:
+            raise ValueError(f"{path}: no contract messages to replay")
+        if self.pump:
+            self.pump(force=True)
+        if first_ns is not None:
+            self.sample_seconds += (last_ns - first_ns) * 1e-9
+        return counts
+
+
+# --------------------------------------------------------------------------
+# recorder
+# --------------------------------------------------------------------------
+class Recorder:
+    """Records topics to MCAP from an rclpy node (raw CDR, no decode).
+
+    Subscribes at once to every known stack topic and, every ``discover_s``,
+    to any other topic under ``/hd/`` or ``/diagnostics`` that appears. Each
+    channel's ``offered_qos_profiles`` is taken from the publishers found on
+    the graph at its first message; the subscription QoS is adapted like
+    ``ros2 bag`` does (best effort if any publisher is best effort,
+    transient-local if all publishers are). The first ``/hd/mission`` message
+    becomes the file's ``hd_mission`` metadata record, so a recorded run
+    passes ``hdphm validate``.
+    """
+
+    def __init__(self, node, out: str | os.PathLike, prefixes=("/hd/", "/diagnostics"), flush_s: float = 0.5,
+                 discover_s: float = 0.25, compression: str = "zstd"):
+        from hd_bag.mcapio import McapFileWriter
+        from hdphm import rosutil as ru
+
+        self.node = node
+        self.out = os.fspath(out)
+        Path(self.out).parent.mkdir(parents=True, exist_ok=True)
+        self.w = McapFileWriter(self.out, compression=compression, library="hdphm record")
+        self.prefixes = tuple(prefixes)
+        self.subs: dict[str, Any] = {}
+        self.types: dict[str, str] = {}
+        self.channels: dict[str, int] = {}
+        self.schemas: dict[str, int] = {}
+        self.counts: dict[str, int] = {}
+        self.pending: list[tuple[int, int, bytes]] = []
+        self.flush_s = float(flush_s)
+        self._last_flush = time.monotonic()
+        self.meta_written = False
+        self.closed = False
+        for topic, (typ, _) in ru.STACK_TOPICS.items():
+            self._subscribe(topic, typ)
+        self.timer = node.create_timer(discover_s, self._discover)
+        self.flush_timer = node.create_timer(self.flush_s, self._maybe_flush)
+
+    def _wanted(self, topic: str) -> bool:
+        return any(topic == p or topic.startswith(p) for p in self.prefixes)
+
+    def _subscribe(self, topic: str, typ: str, pub_qos=None) -> None:
+        from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+        from hdphm import rosutil as ru
+
+        if topic in self.subs or not self._wanted(topic):
+            return
+        try:
+            cls = ru.message_class(typ)
+        except ValueError as e:
+            self.node.get_logger().warning(f"record: skipping {topic}: {e}")
+            return
+        q = ru.topic_qos(topic)
+        if pub_qos:
+            if any(p.reliability == ReliabilityPolicy.BEST_EFFORT for p in pub_qos):
+                q.reliability = ReliabilityPolicy.BEST_EFFORT
+            if all(p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in pub_qos):
+                q.durability = DurabilityPolicy.TRANSIENT_LOCAL
+        self.types[topic] = typ
+        self.counts[topic] = 0
+        sub_holder = {}
+
+        def cb(first, topic=topic):
+            msgs = ru.take_all(sub_holder["s"], first)
+            now = time.time_ns()
+            self._on_msgs(topic, msgs, now)
+
+        sub_holder["s"] = self.node.create_subscription(cls, topic, cb, q, raw=True)
+        self.subs[topic] = sub_holder["s"]
+
+    def _discover(self) -> None:
+        for topic, types in self.node.get_topic_names_and_types():
+            if topic not in self.subs and self._wanted(topic) and types:
+                infos = self.node.get_publishers_info_by_topic(topic)
+                self._subscribe(topic, types[0], [i.qos_profile for i in infos])
+
+    def _channel(self, topic: str) -> int:
+        from hdphm import rosutil as ru
+
+        cid = self.channels.get(topic)
+        if cid is not None:
+            return cid
+        typ = self.types[topic]
+        sid = self.schemas.get(typ)
+        if sid is None:
+            sid = len(self.schemas) + 1
+            self.w.add_schema(sid, typ, "ros2msg", ru.message_definition(typ).encode())
+            self.schemas[typ] = sid
+        infos = self.node.get_publishers_info_by_topic(topic)
+        profiles = [i.qos_profile for i in infos] or [ru.topic_qos(topic)]
+        cid = len(self.channels)
+        self.w.add_channel(cid, sid, topic, "cdr", {"offered_qos_profiles": ru.offered_qos_yaml(profiles)})
+        self.channels[topic] = cid
+        return cid
+
+    def _on_msgs(self, topic: str, msgs: list[bytes], now_ns: int) -> None:
+        if self.closed:
+            return
+        cid = self._channel(topic)
+        for m in msgs:
+            self.pending.append((cid, now_ns, m))
+        self.counts[topic] += len(msgs)
+        if topic == "/hd/mission" and not self.meta_written:
+            from rclpy.serialization import deserialize_message
+            from std_msgs.msg import String
+
+            try:
+                meta = json.loads(deserialize_message(msgs[0], String).data)
+                self.w.add_metadata("hd_mission", {k: str(v) for k, v in meta.items() if k != "bag"})
+                self.meta_written = True
+            except (ValueError, TypeError):
+                self.node.get_logger().warning("record: /hd/mission is not JSON; no hd_mission metadata written")
+        if len(self.pending) >= 20000:
+            self.flush()
+
+    def _maybe_flush(self) -> None:
+        if time.monotonic() - self._last_flush >= self.flush_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write everything pending as one chunk (the file stays readable if the process dies after this)."""
+        from hd_bag.mcapio import message_records
+
+        self._last_flush = time.monotonic()
+        if not self.pending or self.closed:
+            return
+        pend, self.pending = self.pending, []
+        seq: dict[int, int] = getattr(self, "_seq", {})
+        self._seq = seq
+        by_len: dict[tuple[int, int], list[tuple[int, bytes]]] = {}
+        for cid, lt, m in pend:
+            by_len.setdefault((cid, len(m)), []).append((lt, m))
+        blocks = []
+        for (cid, L), items in by_len.items():
+            n = len(items)
+            lt = np.array([i[0] for i in items], np.uint64)
+            pay = np.frombuffer(b"".join(i[1] for i in items), np.uint8).reshape(n, L)
+            s0 = seq.get(cid, 0)
+            seq[cid] = s0 + n
+            sq = (s0 + np.arange(n, dtype=np.uint64)) % (1 << 32)
+            blocks.append((cid, lt, message_records(cid, sq, lt, lt, pay)))
+        self.w.write_chunk(blocks)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.flush()
+        self.closed = True
+        self.w.close()
+
+
+# --------------------------------------------------------------------------
+# in-process stack
+# --------------------------------------------------------------------------
+class Stack:
+    """All four nodes (+ optional replayer/recorder node) in one process, one executor."""
+
+    def __init__(self, domain_id: int | None = None, overrides: dict[str, dict[str, Any]] | None = None,
+                 nodes: Iterable[str] = NODES, record: str | None = None, args: list[str] | None = None):
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        from hdphm import rosutil as ru
+
+        self.ctx = ru.init_context(domain_id, args)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.nodes: dict[str, Any] = {}
+        overrides = overrides or {}
+        for name in nodes:
+            self.add(name, overrides.get(name))
+        self.aux = Node("hdphm_stack_io", context=self.ctx)
+        self.ex.add_node(self.aux)
+        self.recorder = Recorder(self.aux, record) if record else None
+
+    def add(self, name: str, overrides: dict[str, Any] | None = None):
+        node = make_node(name, self.ctx, overrides)
+        self.nodes[name] = node
+        self.ex.add_node(node)
+        return node
+
+    def remove(self, name: str) -> None:
+        node = self.nodes.pop(name)
+        self.ex.remove_node(node)
+        node.destroy_node()
+
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=min(0.02, max(0.0, end - time.monotonic())))
+
+    def pump(self, timeout: float = 0.0, force: bool = False) -> None:
+        """Let every subscriber take what was published (lossless in-process replay)."""
+        end = time.monotonic() + timeout
+        n = 0
+        while True:
+            self.ex.spin_once(timeout_sec=0.0)
+            n += 1
+            if n >= (12 if force else 6) and time.monotonic() >= end:
+                break
+            if time.monotonic() < end:
+                self.ex.spin_once(timeout_sec=min(0.005, max(0.0, end - time.monotonic())))
+
+    def close(self) -> None:
+        if self.recorder:
+            self.pump(force=True)
+            self.recorder.close()
+        for n in list(self.nodes.values()) + [self.aux]:
+            try:
+                self.ex.remove_node(n)
+                n.destroy_node()
+            except Exception:  # noqa: BLE001
+                pass
+        self.ex.shutdown()
+        try:
+            import rclpy
+
+            rclpy.shutdown(context=self.ctx)
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = None, out_mcap: str | None = None,
+                      rate: float | str = "max", domain_id: int | None = None,
+                      overrides: dict[str, dict[str, Any]] | None = None, settle_s: float = 0.5,
+                      progress: bool = True) -> dict:
+    """Replay ``bags`` (in the given order) through twin, onboard, prognostic and ground nodes in one process.
+
+    Returns a summary: per-topic counts published and recorded, flags
+    (actuator, stamp, level, reason), per-actuator last health / RUL, the
+    wall time and the replay speed-up over real time.
+    """
+    overrides = {k: dict(v) for k, v in (overrides or {}).items()}
+    if model_dir:
+        overrides.setdefault("twin", {})["model_dir"] = str(model_dir)
+        overrides.setdefault("onboard", {})["model_dir"] = str(model_dir)
+    st = Stack(domain_id, overrides, record=out_mcap)
+    try:
+        st.spin_for(settle_s)  # latched twin state reaches the onboard node
+        rep = Replayer(st.aux, rate, pump=st.pump)
+        t0 = time.perf_counter()
+        it = bags
+        if progress:
+            from tqdm import tqdm
+
+            it = tqdm(bags, desc="replay", unit="bag", file=sys.stderr)
+        for b in it:
+            rep.play(b)
+        st.pump(force=True)
+        wall = time.perf_counter() - t0
+        st.spin_for(0.3)
+        onb = st.nodes["onboard"]
+        prog = st.nodes.get("prognostic")
+        summary = {
+            "bags": [str(b) for b in bags],
+            "published": dict(rep.counts),
+            "received_onboard": dict(onb.n_msgs),
+            "onboard_published": dict(onb.n_published),
+            "flags": [{"actuator": a, "stamp_s": s * 1e-9, "level": int(lv), "reason": why} for a, s, lv, why in onb.flags],
+            "n_warn": sum(1 for f in onb.flags if f[2] == 1),
+            "n_error": sum(1 for f in onb.flags if f[2] == 2),
+            "errors": list(onb.errors),
+            "health": dict(getattr(prog, "last", {}) or {}),
+            "wall_s": wall,
+            "sample_s": rep.sample_seconds,
+            "speedup": rep.sample_seconds / wall if wall > 0 else float("nan"),
+            "twin": onb.core.expected.kind,
+        }
+        if st.recorder:
+            st.pump(force=True)
+            st.recorder.flush()
+            summary["recorded"] = dict(st.recorder.counts)
+            summary["out_mcap"] = st.recorder.out
+        return summary
+    finally:
+        st.close()
+
+
+# --------------------------------------------------------------------------
+# CLI
+# --------------------------------------------------------------------------
+def _split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
+    if "--ros-args" in argv:
+        i = argv.index("--ros-args")
+        return argv[:i], argv[i:]
+    return argv, []
+
+
+def cmd_node(args) -> int:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hdphm import rosutil as ru
+
+    ctx = ru.init_context(args.domain_id, ros_args_for(args.name, args.ros_args))
+    node = make_node(args.name, ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        ex.spin()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    return 0
+
+
+def cmd_stack(args) -> int:
+    from rclpy.parameter import Parameter  # noqa: F401
+
+    argv = ["hdphm"]
+    for n in NODES:
+        cfg = CONFIG_DIR / f"{n}.yaml"
+        if cfg.is_file():
+            argv += ["--ros-args", "--params-file", str(cfg)]
+    if args.ros_args:
+        argv += args.ros_args if args.ros_args[0] == "--ros-args" else ["--ros-args"] + args.ros_args
+    st = Stack(args.domain_id, record=args.record, args=argv)
+    print(f"hdphm stack: nodes {', '.join(st.nodes)} in one process (domain {args.domain_id or os.environ.get('ROS_DOMAIN_ID', 0)}); Ctrl-C stops",
+          file=sys.stderr)
+    try:
+        st.ex.spin()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        st.close()
+    return 0
+
+
+def cmd_replay(args) -> int:
+    from rclpy.node import Node
+
+    from hdphm import rosutil as ru
+
+    rate = "max" if args.rate == "max" else float(args.rate)
+    ctx = ru.init_context(args.domain_id)
+    node = Node("hdphm_replay", context=ctx)
+    rep = Replayer(node, rate)
+    deadline = time.monotonic() + args.wait_s
+    while time.monotonic() < deadline and rep.pubs[ru.TOPIC_JOINT_STATES].get_subscription_count() == 0:
+        time.sleep(0.05)
+    t0 = time.perf_counter()
+    try:
+        for b in args.bags:
+            c = rep.play(b)
+            print(f"{b}: " + ", ".join(f"{k} {v}" for k, v in c.items()), file=sys.stderr)
+        for p in rep.pubs.values():
+            p.wait_for_all_acked()
+    except ValueError as e:
+        print(f"hdphm replay: {e}", file=sys.stderr)
+        return 2
+    finally:
+        wall = time.perf_counter() - t0
+        node.destroy_node()
+        import rclpy
+
+        rclpy.try_shutdown(context=ctx)
+    print(f"replayed {rep.sample_seconds:.1f} s of data in {wall:.2f} s ({rep.sample_seconds / max(wall, 1e-9):.1f}x real time)",
+          file=sys.stderr)
+    return 0
+
+
+def cmd_record(args) -> int:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from hdphm import rosutil as ru
+
+    ctx = ru.init_context(args.domain_id)
+    node = Node("hdphm_record", context=ctx)
+    rec = Recorder(node, args.out, flush_s=args.flush_s)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    stop = {"v": False}
+
+    def on_term(*_):
+        stop["v"] = True
+
+    signal.signal(signal.SIGTERM, on_term)
+    end = time.monotonic() + args.duration if args.duration else None
+    try:
+        while not stop["v"] and (end is None or time.monotonic() < end):
+            ex.spin_once(timeout_sec=0.05)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        rec.close()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    print(f"recorded {sum(rec.counts.values())} messages to {args.out}: "
+          + ", ".join(f"{k} {v}" for k, v in rec.counts.items() if v), file=sys.stderr)
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("node", help="run one stack node (onboard, prognostic, ground, twin)")
+    p.add_argument("name", choices=NODES)
+    p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default $ROS_DOMAIN_ID)")
+    p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args -p name:=value ...")
+    p.set_defaults(func=cmd_node)
+
+    p = sub.add_parser("stack", help="run all four nodes in one process")
+    p.add_argument("--domain-id", type=int, default=None)
+    p.add_argument("--record", default=None, help="also record to this MCAP file")
+    p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args -p onboard.param:=value ...")
+    p.set_defaults(func=cmd_stack)
+
+    p = sub.add_parser("replay", help="publish bags on the contract topics with their original stamps")
+    p.add_argument("bags", nargs="+")
+    p.add_argument("--rate", default="1.0", help="1.0 = real time, 'max' = as fast as the subscribers take it")
+    p.add_argument("--domain-id", type=int, default=None)
+    p.add_argument("--wait-s", type=float, default=5.0, help="wait this long for a subscriber before starting")
+    p.set_defaults(func=cmd_replay)
+
+    p = sub.add_parser("record", help="record /hd/..., /diagnostics and stack topics to MCAP")
+    p.add_argument("--out", required=True)
+    p.add_argument("--domain-id", type=int, default=None)
+    p.add_argument("--flush-s", type=float, default=0.5, help="chunk flush period (data at risk on a kill)")
+    p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: until Ctrl-C/SIGTERM)")
+    p.set_defaults(func=cmd_record)
