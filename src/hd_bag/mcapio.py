@@ -438,10 +438,14 @@ def _parse_metadata(c: bytes) -> tuple[str, dict[str, str]]:
 def _split_records(buf: bytes, where: str, scan: McapScan) -> MessageBlock:
     """Walk the records of a chunk body; return its messages (schemas/channels go into ``scan``)."""
     n = len(buf)
+    arr = np.frombuffer(buf, np.uint8)
     starts: list[int] = []
     lens: list[int] = []
+    runs: list[tuple[int, int, int]] = []  # (first record start, stride, count) of equal-length message runs
     p = 0
+    window = 16
     unpack = struct.unpack_from
+    ar8 = np.arange(1, 9)
     while p < n:
         if p + 9 > n:
             raise McapFormatError(f"{where}: record header cut at byte {p} of {n}")
@@ -450,6 +454,21 @@ def _split_records(buf: bytes, where: str, scan: McapScan) -> MessageBlock:
         if q + ln > n:
             raise McapFormatError(f"{where}: record (opcode 0x{op:02x}) of {ln} bytes overruns the chunk")
         if op == OP_MESSAGE:
+            # Fast path: consecutive message records of the same length form a run whose headers sit
+            # at a fixed stride; verify them in one numpy step (each verified header proves where the
+            # next record starts, so the verified prefix is exact).
+            stride = 9 + ln
+            maxj = min((n - p) // stride, window)
+            if maxj >= 4:
+                pos = p + stride * np.arange(maxj)
+                ok = arr[pos] == OP_MESSAGE
+                ok &= np.ascontiguousarray(arr[pos[:, None] + ar8]).view("<u8").ravel() == ln
+                run = maxj if ok.all() else int(np.argmin(ok))
+                window = min(window * 2, 1 << 16) if run == maxj else 16
+                if run > 1:
+                    runs.append((q, stride, run))
+                    p += run * stride
+                    continue
             starts.append(q)
             lens.append(ln)
         elif op == OP_SCHEMA:
@@ -459,9 +478,13 @@ def _split_records(buf: bytes, where: str, scan: McapScan) -> MessageBlock:
             c = _parse_channel(buf[q:q + ln])
             scan.channels[c.id] = c
         p = q + ln
-    arr = np.frombuffer(buf, np.uint8)
     st = np.asarray(starts, np.int64)
     ln = np.asarray(lens, np.int64)
+    if runs:
+        st = np.concatenate([st] + [q0 + s_ * np.arange(k, dtype=np.int64) for q0, s_, k in runs])
+        ln = np.concatenate([ln] + [np.full(k, s_ - 9, np.int64) for _, s_, k in runs])
+        o = np.argsort(st, kind="stable")  # keep file order
+        st, ln = st[o], ln[o]
     if len(st) and ln.min() < MSG_FIXED:
         raise McapFormatError(f"{where}: message record shorter than its fixed header")
     idx = st[:, None] + np.arange(MSG_FIXED)[None, :]
