@@ -121,3 +121,25 @@ def test_iter_messages_log_time_order_real_ros_classes(tmp_path, mission):
     assert js[5][3].position[1] == mission.theta_f[5]
     temps = list(iter_messages(p, topics=["/hd/temperature"]))
     assert len(temps) == 40 and isinstance(temps[0][3], Temperature)
+
+
+def test_streaming_add_serialized_as_a_recorder_would(tmp_path, mission):
+    """hdphm record path: messages serialised by rclpy arrive one by one (with rclpy's padding bytes)."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    from hd_bag import MissionWriter
+
+    with MissionWriter(tmp_path / "rec.mcap", mission.meta, chunk_seconds=0.1) as w:
+        for i in range(300):
+            st = T0_NS + i * 1_000_000
+            msg = JointState()
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(st, 10**9)
+            msg.name = ["motor", "output"]
+            msg.position = [float(mission.theta_m[i]), float(mission.theta_f[i])]
+            msg.velocity = [1.0, 2.0]
+            msg.effort = [3.0, float("nan")]
+            w.add_serialized("/hd/joint_states", serialize_message(msg), st)
+    r = read_mission(tmp_path / "rec.mcap")
+    np.testing.assert_array_equal(r.theta_m, mission.theta_m[:300])
+    assert np.isnan(r.Q_red).all() and (r.tau_m == 3.0).all()
