@@ -31,6 +31,34 @@ def _eff(params: Mapping[str, Any], effects: EffectSet, name: str, key: str) -> 
     return v
 
 
+def bouc_wen_width(z_max: float, A: float, k_FS: float, F_pk: float) -> float:
+    """Zero-force loop width [m of y_FS] of k_FS y + z (Bouc-Wen n = 1, beta = gamma) cycled to +-F_pk.
+
+    Unloading from the saturated branch: z falls linearly (slope A) to 0, then
+    approaches -z_max exponentially; closed form plus a scalar root.
+    """
+    from scipy.optimize import brentq
+
+    y_pk = (F_pk - z_max) / k_FS
+    d1 = z_max / A
+    D = (k_FS * y_pk + z_max) / (k_FS + A)
+    if D > d1:
+        f = lambda D_: k_FS * (y_pk - D_) - z_max * (1.0 - math.exp(-A * (D_ - d1) / z_max))  # noqa: E731
+        D = brentq(f, d1, abs(y_pk) + 20.0 * z_max / min(k_FS, A) + d1)
+    return 2.0 * abs(y_pk - D)
+
+
+def bouc_wen_z_max(width: float, A: float, k_FS: float, F_pk: float) -> float:
+    """z_max [N] giving the zero-force loop ``width`` [m] at +-F_pk; ValueError if A is too small for it."""
+    zs = np.linspace(F_pk * 1e-3, 0.9 * F_pk, 200)
+    w = np.array([bouc_wen_width(z, A, k_FS, F_pk) for z in zs])
+    i_pk = int(np.argmax(w))
+    if width > w[i_pk]:
+        raise ValueError(f"hysteresis loss of {width:.3g} m unreachable with Bouc-Wen A = {A:.3g} N/m (max "
+                         f"{w[i_pk]:.3g} m): raise hysteresis.A_ratio (and --n-sub for stability)")
+    return float(np.interp(width, w[: i_pk + 1], zs[: i_pk + 1]))
+
+
 def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, float]) -> dict[str, float]:
     """Physical parameters of this mission (after wear and faults), SI; written to /sim/effects 'params'."""
     check_params(params)
@@ -82,9 +110,10 @@ def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, 
     if on("backlash"):
         j = max(0.0, (hp + hm - 2.0 * p["delta_0"]) if wear else 0.0) / math.cos(p["alpha_p"])
         j += effects.p("backlash", "j0")
-    # hysteresis: zero-torque loop width (output angle) = 2 z_max / (k_FS r_m)
-    z_max = 0.5 * effects.p("hysteresis", "loss_arcmin") * ARCMIN * k_FS_eff * r_m
+    # hysteresis: zero-torque loop width (output angle) at +-T_rated = loss_arcmin
     bw_A = effects.p("hysteresis", "A_ratio") * k_FS_eff
+    loss = effects.p("hysteresis", "loss_arcmin") * ARCMIN * r_m
+    z_max = bouc_wen_z_max(loss, bw_A, k_FS_eff, p["T_rated"] / r_m) if (on("hysteresis") and loss > 0) else 0.0
     bw_beta = bw_gamma = bw_A / (2.0 * z_max) if z_max > 0 else 0.0
     mu_c = 0.0
     if on("load_dependent_friction"):

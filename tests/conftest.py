@@ -1,0 +1,59 @@
+"""Shared, session-scoped fixtures built on the plant simulator (kept quick: seconds, not minutes).
+
+- ``make_mission_bag(path, effects_on=(), effects_off=(), preset="baseline", params=None,
+  duration=3.0, seed=0, profile="inspection", wear_um=0.0, with_sim=True, **kw)`` writes
+  one contract bag and returns ``(path, Mission, truth)``. ``effects_on`` switches
+  single effects on top of the preset, ``params`` is ``{"NAME.KEY": value}``.
+- ``small_fleet_dir``: 3 actuators x 3 missions of 3 s (nominal wear schedule
+  accelerated so wear visibly grows), one folder per actuator + fleet_truth.json.
+- ``sim_mission``: a 3 s realistic (default effects) mission in memory: (Mission, truth).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+
+def _make_mission_bag(path, effects_on=(), effects_off=(), preset="baseline", params=None, duration=3.0, seed=0,
+                      profile="inspection", wear_um=0.0, with_sim=True, **kw):
+    from hd_sim import EffectSet, write_sim_mission
+
+    eff = EffectSet.preset(preset).with_on(*effects_on).with_off(*effects_off)
+    if params:
+        eff = eff.with_params(**params)
+    health = {"h_plus": wear_um * 1e-6, "h_minus": wear_um * 1e-6}
+    return write_sim_mission(path, None, eff, profile, seed, with_sim=with_sim, duration=duration,
+                             health=health, **kw)
+
+
+@pytest.fixture(scope="session")
+def make_mission_bag():
+    """Factory: ``make_mission_bag(path, effects_on=("stribeck_friction",), ...) -> (path, Mission, truth)``."""
+    return _make_mission_bag
+
+
+@pytest.fixture(scope="session")
+def small_fleet_dir(tmp_path_factory):
+    """A few actuators x a few short missions as bags (wear accelerated so it grows visibly)."""
+    from hd_sim.fleet import simulate_life
+    from hd_sim.params import sample_population
+
+    out = tmp_path_factory.mktemp("fleet")
+    import json
+
+    summary = []
+    for p in sample_population(3, seed=7):
+        p["mission_hours"] = 5.0e3  # ~5 um of wear per mission: missions differ visibly
+        rows = simulate_life(p, 3, out, duration=3.0, seed=7, sim_internal_every=1)
+        summary.append({"actuator_id": p["actuator_id"], "missions": rows})
+    with open(out / "fleet_truth.json", "w") as f:
+        json.dump({"actuators": summary}, f, default=float)
+    return out
+
+
+@pytest.fixture(scope="session")
+def sim_mission():
+    """A 3 s mission with the realistic default effects, in memory: (Mission, truth)."""
+    from hd_sim import simulate_mission
+
+    return simulate_mission(None, None, "inspection", 3, duration=3.0)
