@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 import pytest
-from conftest import T0_NS, make_mission
+from tests.bag.conftest import T0_NS, make_mission
 
 from hd_bag import BagError, MissionMeta, MissionWriter, read_mission, validate_bag, write_mission
 from hd_bag.cdr import SCHEMAS

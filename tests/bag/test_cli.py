@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from conftest import make_mission
+from tests.bag.conftest import make_mission
 
 from hd_bag import write_mission
 from hdphm.cli import main as hdphm

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import T0_NS, make_mission
+from tests.bag.conftest import T0_NS, make_mission
 
 from hd_bag import BagError, MissionWriter, read_mission, validate_bag
 from hd_bag.mission import MAX_INTERP_GAP_SAMPLES

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import yaml
-from conftest import T0_NS, make_mission
+from tests.bag.conftest import T0_NS, make_mission
 
 from hd_bag import iter_messages, read_mission, validate_bag, write_mission
 from hd_bag.mission import JOINT_SIGNALS

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, os.path.dirname(__file__))
-from synth import make_mission  # noqa: E402
+from tests.onboard.synth import make_mission  # noqa: E402
 
 from hd_onboard.core import OnboardConfig, OnboardCore, run_mission, RESIDUAL_COLUMNS  # noqa: E402
 from hd_onboard.detector import ERROR, OK, WARN, ChannelThreshold, LevelLatch, ewma, run_lengths  # noqa: E402

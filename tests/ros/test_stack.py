@@ -7,7 +7,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "onboard"))
-from synth import make_mission  # noqa: E402
+from tests.onboard.synth import make_mission  # noqa: E402
 
 from hd_bag import read_mission, validate_bag, write_mission  # noqa: E402
 from hdphm import rosutil as ru  # noqa: E402
