@@ -128,6 +128,9 @@ def sample_population(n: int, seed: int = 0, id_prefix: str = "EMA") -> list[dic
             else:
                 d[k] = float(base * max(0.5, 1.0 + spec[1] * rng.standard_normal()))
         d["effect_scale"] = {k: float(max(0.3, 1.0 + s * rng.standard_normal())) for k, s in EFFECT_SPREAD.items()}
+        # one stiffness factor for the whole torsion curve (keeps K1 <= K2 <= K3)
+        for k in ("nonlinear_stiffness.K2", "nonlinear_stiffness.K3"):
+            d["effect_scale"][k] = d["effect_scale"]["nonlinear_stiffness.K1"]
         for ph in PHASES:
             d[ph] = float(rng.uniform(0.0, 2.0 * math.pi))
         d["actuator_id"] = f"{id_prefix}-{i:04d}"

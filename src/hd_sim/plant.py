@@ -49,11 +49,17 @@ def bouc_wen_width(z_max: float, A: float, k_FS: float, F_pk: float) -> float:
 
 
 def bouc_wen_z_max(width: float, A: float, k_FS: float, F_pk: float) -> float:
-    """z_max [N] giving the zero-force loop ``width`` [m] at +-F_pk; ValueError if A is too small for it."""
+    """z_max [N] giving the zero-force loop ``width`` [m] at +-F_pk.
+
+    If A is too small to reach ``width`` (the loop width peaks as z_max grows), the
+    widest reachable loop is used when the shortfall is < 15 %; else ValueError.
+    """
     zs = np.linspace(F_pk * 1e-3, 0.9 * F_pk, 200)
     w = np.array([bouc_wen_width(z, A, k_FS, F_pk) for z in zs])
     i_pk = int(np.argmax(w))
     if width > w[i_pk]:
+        if width <= 1.15 * w[i_pk]:
+            return float(zs[i_pk])
         raise ValueError(f"hysteresis loss of {width:.3g} m unreachable with Bouc-Wen A = {A:.3g} N/m (max "
                          f"{w[i_pk]:.3g} m): raise hysteresis.A_ratio (and --n-sub for stability)")
     return float(np.interp(width, w[: i_pk + 1], zs[: i_pk + 1]))
