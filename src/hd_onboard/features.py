@@ -270,7 +270,9 @@ def window_features(mission, window_s: float = 10.0, hop_s: float | None = None,
         raise ValueError(f"hop_s must be > 0, got {hop_s!r}")
     m = mission
     temp = m.temperature_on_t("gearbox")
-    starts = np.arange(m.t[0], max(m.t[-1] - window_s, m.t[0]) + 1e-9, hop) if m.n else []
+    dt = float(np.median(np.diff(m.t))) if m.n > 1 else 0.0
+    # a window is complete when it ends within one sample period of the last stamp
+    starts = np.arange(m.t[0], max(m.t[-1] + dt - window_s, m.t[0]) + 1e-9, hop) if m.n else []
     lo = np.searchsorted(m.t, starts, side="left")
     hi = np.searchsorted(m.t, np.asarray(starts) + window_s, side="left")
     out = []

@@ -104,7 +104,7 @@ def _eval(args) -> int:
     from hd_prognostic.evaluate import fleet_eval, load_fleet
 
     out = Path(args.out)
-    fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache")
+    fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache", workers=args.workers)
     s = fleet_eval(fleet, out, folds=args.folds, n_particles=args.particles, seed=args.seed, feature=args.feature,
                    degree=args.degree, likelihood=args.likelihood, with_ukf=not args.no_ukf)
     ag = s["aggregate"]
@@ -121,7 +121,7 @@ def _features(args) -> int:
     from hd_prognostic.evaluate import feature_study, load_fleet
 
     out = Path(args.out)
-    fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache")
+    fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache", workers=args.workers)
     res = feature_study(fleet, out)
     for f, r in res.items():
         print(f"{f:20s} Spearman {r['spearman_mean']:+.2f} (min {r['spearman_min']:+.2f})  "
@@ -135,7 +135,7 @@ def _fit_obs(args) -> int:
     from hd_prognostic.evaluate import load_fleet
     from hd_prognostic.hd import fit_population
 
-    fleet = load_fleet(args.fleet_dir, cache_dir=Path(args.out).parent / "cache")
+    fleet = load_fleet(args.fleet_dir, cache_dir=Path(args.out).parent / "cache", workers=args.workers)
     obs = fit_population(fleet, feature=args.feature, degree=args.degree)
     obs.to_json(args.out)
     print(json.dumps({"fit_info": obs.fit_info, "degradation": obs.degradation}, indent=1))
@@ -229,16 +229,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--degree", type=int, default=2)
     p.add_argument("--likelihood", choices=("gaussian", "student_t"), default="student_t")
     p.add_argument("--no-ukf", action="store_true", help="skip the UKF baseline")
+    p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
     p.set_defaults(func=_eval)
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")
     p.add_argument("--out", default="runs/prognostic_features")
+    p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
     p.set_defaults(func=_features)
     p = s.add_parser("fit-obs", help="fit the observation model + Archard prior on a training fleet")
     p.add_argument("fleet_dir")
     p.add_argument("--out", required=True, help="JSON to write")
     p.add_argument("--feature", default="HF_MTW_IF")
     p.add_argument("--degree", type=int, default=2)
+    p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
     p.set_defaults(func=_fit_obs)
     p = s.add_parser("battery", help="NASA B0005-7 exponential-fade PF, leave-one-cell-out")
     p.add_argument("--out", default="runs/prognostic_battery")

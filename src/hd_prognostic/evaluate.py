@@ -26,15 +26,31 @@ STUDY_FEATURES = ("HF_MTW_IF", "ke_2x", "ke_1x", "ke_4x", "lost_motion", "hyster
                   "compliance_residual", "cs_gain", "cs_rms_ratio", "efficiency")
 
 
-def load_fleet(fleet_dir, cache_dir=None, progress: bool = True) -> list[ActuatorData]:
+def _extract_one(args):
+    d, cache = args
+    t0 = time.perf_counter()
+    return extract_actuator(d, include_truth=True, cache=cache), time.perf_counter() - t0
+
+
+def load_fleet(fleet_dir, cache_dir=None, progress: bool = True, workers: int = 1) -> list[ActuatorData]:
+    """Features + wear truth of every actuator folder (cached per actuator; ``workers`` processes)."""
+    jobs = [(d, Path(cache_dir) / f"{d.name}.features.json" if cache_dir else None)
+            for d in find_actuator_dirs(fleet_dir)]
+    if workers > 1 and len(jobs) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(workers, len(jobs))) as ex:
+            results = list(ex.map(_extract_one, jobs))
+    else:
+        results = []
+        for j in jobs:
+            results.append(_extract_one(j))
+            if progress:
+                print(f"  {j[0].name}: {len(results[-1][0].paths)} missions ({results[-1][1]:.0f} s)", flush=True)
     out = []
-    for d in find_actuator_dirs(fleet_dir):
-        cache = Path(cache_dir) / f"{d.name}.features.json" if cache_dir else None
-        t0 = time.perf_counter()
-        a = extract_actuator(d, include_truth=True, cache=cache)
+    for (d, _), (a, dt) in zip(jobs, results):
         if progress:
-            print(f"{d.name}: {len(a.paths)} missions, EOL mission {a.eol_mission()}, "
-                  f"{time.perf_counter() - t0:.1f} s", flush=True)
+            print(f"{d.name}: {len(a.paths)} missions, EOL mission {a.eol_mission()}, {dt:.1f} s", flush=True)
         out.append(a)
     return out
 

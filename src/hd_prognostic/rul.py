@@ -103,6 +103,11 @@ def rul_distribution(
     x = model.check_state(x).copy()
     n = len(x)
     w = np.full(n, 1.0 / n) if weights is None else np.asarray(weights, float) / np.sum(weights)
+    fast = getattr(model, "rul_fast", None)
+    if fast is not None and not keep_paths:
+        r = fast(x, future, float(step), int(max_steps), rng)
+        if r is not None:
+            return RULResult(r, w, float(step), float(max_steps * step), model.time_unit)
     rul = np.full(n, np.inf)
     rul[model.failed(x)] = 0.0
     alive = np.flatnonzero(~np.isfinite(rul))
