@@ -32,7 +32,7 @@ Input-side friction (PHYSICS.md 2.5) of the declared effects is removed from
 the motor torque: ``Q_res = tau_m - T_fric_in - sum(extra input terms)``.
 
 The twin never imports the plant (``hd_sim``): its numbers come from
-``default_params.yaml`` (PHYSICS.md's own size-25 estimates), from the bag
+``default_params.yaml`` (PHYSICS.md's own estimates scaled to size 65), from the bag
 metadata (N, k_t) and from recalibration.
 """
 
@@ -141,26 +141,26 @@ class TwinParams:
     """
 
     N: float = 101.0
-    k_t: float = 0.3
-    r_b: float = 0.0275
-    r_m: float = 0.0318
-    J_WG: float = 0.41e-4
-    J_rotor: float = 1.0e-4
-    J_CS: float = 1.0e-3
-    m_FSx: float = 0.015
-    m_FSy: float = 0.075
-    k_b: float = 3.7e4
-    k_m: float = 1.1e8
-    k_FS: float = 1.9e8
-    c_b: float = 1.4
-    c_m: float = 172.0
-    c_FS: float = 226.0
+    k_t: float = 1.2
+    r_b: float = 0.070
+    r_m: float = 0.0826
+    J_WG: float = 4.9e-3
+    J_rotor: float = 2.0e-3
+    J_CS: float = 0.12
+    m_FSx: float = 0.05
+    m_FSy: float = 1.3
+    k_b: float = 1.0e5
+    k_m: float = 2.9e8
+    k_FS: float = 4.9e8
+    c_b: float = 4.2
+    c_m: float = 1.2e3
+    c_FS: float = 1.5e3
     mu_c: float = 0.0029
-    T_C: float = 0.1
-    T_S: float = 0.13
+    T_C: float = 1.1
+    T_S: float = 1.45
     omega_s: float = 5.0
     stribeck_delta: float = 1.0
-    b_visc: float = 3.5e-5
+    b_visc: float = 6.0e-4
     eps_omega: float = 0.05
     c_L: float = 1.0e-3
     T_ref: float = 25.0
@@ -321,10 +321,15 @@ def closure_forces(xp, p: TwinParams, effects, u, u_d, y, y_d, phi, phi_d, omega
     F_b = p.k_b * d_b + (p.c_b * d_b_d if damp else 0.0)
     F_my = p.k_m * d_m + (p.c_m * d_m_d if damp else 0.0)
     F_FS = p.k_FS * y + (p.c_FS * y_d if damp else 0.0)
-    F_mx = mu_g * F_my
+    return F_b, mesh_radial_force(xp, p, effects, F_my, omega_m), F_my, F_FS
+
+
+def mesh_radial_force(xp, p: TwinParams, effects, F_my, omega_m):
+    """Radial mesh force F_mx [N] from the tangential F_my [N]: wedge mu_g F_my (+ flank friction)."""
+    F_mx = p.mu_g * F_my
     if "mesh_friction" in effects:
         F_mx = F_mx + p.mu_c * xp.abs(F_my) * sgn_eps(xp, omega_m, p.eps_omega)
-    return F_b, F_mx, F_my, F_FS
+    return F_mx
 
 
 def residuals(xp, p: TwinParams, effects, *, Q_res, Q_red, theta_m_dd, theta_f_dd, x_FS_dd, y_FS_dd,

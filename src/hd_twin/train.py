@@ -141,10 +141,11 @@ def resolve_params(cfg: TrainConfig, missions: Sequence) -> ph.TwinParams:
     """Twin parameters: config (or the default YAML) with N and k_t from the bags' metadata."""
     base = ph.TwinParams.from_dict(cfg.params, "model config params") if cfg.params else ph.TwinParams.from_yaml()
     Ns = {float(m.meta.gear_ratio) for m in missions}
-    kts = {float(m.meta.torque_constant) for m in missions}
-    if len(Ns) > 1 or max(kts) - min(kts) > 1e-9 * max(kts):
-        raise ValueError(f"training missions mix gear ratios {sorted(Ns)} or torque constants {sorted(kts)}; train one twin per actuator type")
-    return base.with_meta(Ns.pop(), kts.pop())
+    if len(Ns) > 1:
+        raise ValueError(f"training missions mix gear ratios {sorted(Ns)}; train one twin per actuator type")
+    # k_t varies from unit to unit (tau_m is already k_t i_q in N*m); the twin keeps the median
+    kt = float(np.median([float(m.meta.torque_constant) for m in missions]))
+    return base.with_meta(Ns.pop(), kt)
 
 
 def fs_model_for(missions: Sequence, fs_target: float | None) -> float:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hd_twin import data as D
-from synth import synth_fleet, synth_mission
+from tests.twin.synth import synth_fleet, synth_mission
 
 
 def test_split_never_leaks_actuators_or_missions():

@@ -113,7 +113,7 @@ def test_input_friction_effects():
 def test_params_yaml_meta_and_validation(tmp_path):
     p = ph.TwinParams.from_yaml()
     assert p.mu_g == pytest.approx(p.r_m / (p.N * p.r_b))
-    assert 3e4 < p.K_out < 1e5  # size-25 catalogue K3 = 5.7e4 N*m/rad
+    assert 5e5 < p.K_out < 2e6  # size-65 K3 ~ 1.0e6 N*m/rad (size-25 catalogue 5.7e4 scaled)
     q = p.with_meta(gear_ratio=160, torque_constant=0.2)
     assert q.N == 160 and q.k_t == 0.2 and p.N != 160
     with pytest.raises(ValueError, match="k_m"):
@@ -140,7 +140,7 @@ def test_params_yaml_meta_and_validation(tmp_path):
 def test_quasi_static_baseline_matches_closure():
     p = ph.TwinParams()
     eff = ["linear_stiffness", "mesh_friction", "coulomb_friction"]
-    tau = np.array([0.5, -0.5])
+    tau = np.array([5.0, -5.0])
     om = np.array([100.0, 100.0])  # driving, then back-driven (torque against motion)
     Q = ph.quasi_static_Q_red(p, eff, tau, om)
     Q_res = tau - p.T_C * np.tanh(om / p.eps_omega)

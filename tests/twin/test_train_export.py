@@ -8,7 +8,7 @@ import torch
 
 from hd_twin import data as D
 from hd_twin.train import TrainConfig, eval_model, load_pinn, predict_segments, train_twin
-from synth import synth_fleet, synth_mission
+from tests.twin.synth import synth_fleet, synth_mission
 
 
 @pytest.fixture(scope="module")
