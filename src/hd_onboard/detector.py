@@ -134,6 +134,17 @@ class ChannelDetector:
             self.run_warn, self.run_error = int(rw[-1]), int(re[-1])
         return z, e, rw >= self.persistence, re >= self.persistence
 
+    def step_one(self, r: float) -> tuple[float, bool, bool]:
+        """One residual (scalar, NaN allowed) -> (e, cond_warn, cond_error); same arithmetic as :meth:`step`."""
+        th = self.threshold
+        z = (r - th.mu) / th.sigma
+        if z == z and z not in (math.inf, -math.inf):
+            self.e = self.lam * z + (1.0 - self.lam) * self.e
+        a = abs(self.e)
+        self.run_warn = self.run_warn + 1 if a > th.h_warn else 0
+        self.run_error = self.run_error + 1 if a > th.h_error else 0
+        return self.e, self.run_warn >= self.persistence, self.run_error >= self.persistence
+
 
 class LevelLatch:
     """Turns per-sample WARN/ERROR conditions into levels held for ``hold_s`` seconds."""
@@ -156,3 +167,15 @@ class LevelLatch:
         lev[t - lw < self.hold_s] = WARN
         lev[t - le < self.hold_s] = ERROR
         return lev
+
+    def step_one(self, t: float, cond_warn: bool, cond_error: bool) -> int:
+        """Level of one sample at time ``t`` [s]; same arithmetic as :meth:`step`."""
+        if cond_warn or cond_error:
+            self.last_warn = max(self.last_warn, t)
+        if cond_error:
+            self.last_error = max(self.last_error, t)
+        if t - self.last_error < self.hold_s:
+            return ERROR
+        if t - self.last_warn < self.hold_s:
+            return WARN
+        return OK

@@ -44,6 +44,7 @@ class CausalDerivative:
         if not (cutoff_hz > 0 and fs_hz > 2 * cutoff_hz):
             raise ValueError(f"derivative filter: cutoff {cutoff_hz} Hz must be in (0, fs/2 = {fs_hz / 2} Hz)")
         self.sos = butter(2, cutoff_hz, fs=fs_hz, output="sos")
+        self._sos_rows = [tuple(float(c) for c in row) for row in self.sos]
         self.n_ch = n_ch
         self.reset()
 
@@ -80,6 +81,30 @@ class CausalDerivative:
         self.prev = (t[-1], x[-1].copy())
         return y
 
+    def step_one(self, t: float, x0: float, x1: float) -> tuple[float, float]:
+        """One sample of a 2-channel filter (finite inputs, state initialised by :meth:`step`).
+
+        Same arithmetic as :meth:`step` (backward difference, then each
+        second-order section in transposed direct form II, as ``sosfilt``).
+        """
+        t_prev, x_prev = self.prev
+        dt = t - t_prev
+        if dt > 0:
+            d = [(x0 - x_prev[0]) / dt, (x1 - x_prev[1]) / dt]
+        else:
+            d = [0.0, 0.0]
+        zi = self.zi
+        for k, (b0, b1, b2, _, a1, a2) in enumerate(self._sos_rows):
+            for ch in (0, 1):
+                xin = d[ch]
+                y = b0 * xin + zi[k, 0, ch]
+                zi[k, 0, ch] = b1 * xin - a1 * y + zi[k, 1, ch]
+                zi[k, 1, ch] = b2 * xin - a2 * y
+                d[ch] = y
+        x_prev[0], x_prev[1] = x0, x1
+        self.prev = (t, x_prev)
+        return d[0], d[1]
+
 
 class PhysicsStandInExpected:
     """Physics-only stand-in for the twin (see module docstring)."""
@@ -106,6 +131,15 @@ class PhysicsStandInExpected:
         temp = temp if np.isfinite(temp).all() else None
         return ph.quasi_static_Q_red(self.params, self.effects, X[:, I_TAU], X[:, I_WM], temp,
                                      theta_m_dd=acc[:, 0], theta_f_dd=acc[:, 1])
+
+    def step_one(self, t: float, x: np.ndarray) -> float:
+        """One sample (finite inputs; the segment was started by :meth:`step`): Q_red_hat [N*m]."""
+        if self.deriv.prev is None:
+            return float(self.step(np.array([t]), x[None, :])[0])
+        a_m, a_f = self.deriv.step_one(t, float(x[I_WM]), float(x[I_WF]))
+        temp = float(x[I_TEMP])
+        return float(ph.quasi_static_Q_red(self.params, self.effects, float(x[I_TAU]), float(x[I_WM]),
+                                           temp if temp == temp else None, theta_m_dd=a_m, theta_f_dd=a_f))
 
 
 class OnnxTwinExpected:

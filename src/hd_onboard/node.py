@@ -21,7 +21,10 @@ joint-state time advanced ``stale_timeout_s`` past their last sample).
 from __future__ import annotations
 
 import math
+import sys
 import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -48,6 +51,10 @@ PARAMS: dict[str, Any] = {
     "diag_period_s": 0.5,  # s of sample time between periodic /diagnostics
     "stale_timeout_s": 2.0,  # s
     "max_block": 2000,  # samples per core call
+    "short_path_max": 32,  # a callback with at most this many samples uses the per-sample short path
+    "residual_rows": 100,  # residual rows per /hd/onboard/residuals message (sooner on a level change)
+    "feature_thread": True,  # window statistics/features in a worker thread (never delays a flag)
+    "latency_probe": False,  # bench only: record wall-clock now - header.stamp per sample (stamps must be wall time)
 }
 
 
@@ -108,6 +115,12 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
             self.latency_s: list[float] = []  # arrival -> flag decision, per block (bench)
             self.n_published = {ru.TOPIC_RESIDUALS: 0, ru.TOPIC_FEATURES: 0, ru.TOPIC_DIAGNOSTICS: 0}
             self.errors: list[str] = []
+            self.latency_ns: list[int] = []  # latency_probe: per sample, decision wall time - header.stamp
+            self._pending_feat: deque = deque()  # futures of window rows, in window order
+            self._pool = ThreadPoolExecutor(1, thread_name_prefix="onboard-features") if self.p["feature_thread"] else None
+            if self._pool is not None and sys.getswitchinterval() > 5e-4:
+                # the worker holds the GIL at most this long when a sample arrives (default 5 ms)
+                sys.setswitchinterval(5e-4)
             self.flags: list[tuple[str, int, int, str]] = []  # (actuator, stamp_ns, level, reason)
             self.pub_res = self.create_publisher(Float64MultiArray, ru.TOPIC_RESIDUALS, ru.topic_qos(ru.TOPIC_RESIDUALS))
             self.pub_feat = self.create_publisher(Float64MultiArray, ru.TOPIC_FEATURES, ru.topic_qos(ru.TOPIC_FEATURES))
@@ -130,6 +143,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
                                 log=lambda s: self.get_logger().warning(s))
             self.core = OnboardCore(exp, params, None, self.thresholds_all.get(self.hardware_id), self.cfg,
                                     feature_fn=_feature_fn(self.meta, N))
+            self.core.defer_windows = True
             self.last_diag_t = -math.inf
             self.level = OK
 
@@ -147,10 +161,56 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
             self.get_logger().info(f"mission {meta.get('mission_index')} of {self.hardware_id}: core reset")
 
         def _close_mission(self):
+            """End of the current mission: its last window and every pending row are published (in order)."""
             if self.core is not None:
-                w = self.core.flush()
-                if w:
-                    self._publish_windows(w)
+                self._flush_rows()
+                self.core.flush()
+                self._submit_windows(final=True)
+                self._drain_windows(wait=True)
+
+        def close_mission(self):
+            """Public: close the current mission now (end of a replay; a live driver's /hd/mission does it too)."""
+            self._close_mission()
+
+        def _submit_windows(self, final: bool = False):
+            from hd_onboard.core import window_row
+
+            jobs = self.core.take_window_jobs()
+            mi = _float_or_nan(self.meta.get("mission_index"))
+            fn = self.core.feature_fn
+            for k, job in enumerate(jobs):
+                last = final and k == len(jobs) - 1
+
+                def work(job=job, last=last):
+                    row = window_row(job, fn)
+                    if row is not None:
+                        row["mission_index"] = mi
+                        row["final"] = 1.0 if last else 0.0
+                    return row
+
+                if self._pool is None:
+                    self._pending_feat.append(_Done(work()))
+                else:
+                    self._pending_feat.append(self._pool.submit(work))
+
+        def _drain_windows(self, wait: bool = False):
+            rows = []
+            while self._pending_feat and (wait or self._pending_feat[0].done()):
+                try:
+                    r = self._pending_feat.popleft().result()
+                except Exception as e:  # noqa: BLE001 - a feature failure is reported, monitoring goes on
+                    self.get_logger().error(f"window features failed: {type(e).__name__}: {e}")
+                    continue
+                if r is not None:
+                    rows.append(r)
+            if rows:
+                self._publish_windows(rows)
+
+        def _flush_rows(self):
+            tab = self.core.take_rows()
+            if len(tab):
+                self.pub_res.publish(ru.pack_table(RESIDUAL_COLUMNS, tab))
+                self.n_published[ru.TOPIC_RESIDUALS] += 1
 
         def _on_twin(self, msg):
             try:
@@ -210,28 +270,48 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
                 self.hardware_id = "unknown"
             self.n_msgs[ru.TOPIC_JOINT_STATES] += len(stamps)
             self.last_wall[ru.TOPIC_JOINT_STATES] = time.monotonic()
-            mb = int(self.p["max_block"])
-            for a in range(0, len(stamps), mb):
-                self._process(stamps[a:a + mb], V[a:a + mb])
+            core = self.core
+            n_ok = len(stamps)
+            if n_ok <= int(self.p["short_path_max"]):
+                probe = self.p["latency_probe"]
+                for s_, v_ in zip(stamps.tolist(), V.tolist()):
+                    lev = core.push_one(s_, v_)
+                    if lev != self.level:
+                        self._after_samples(force_rows=True)
+                    if probe:
+                        self.latency_ns.append(time.time_ns() - s_)
+            else:
+                mb = int(self.p["max_block"])
+                for a in range(0, n_ok, mb):
+                    r = core.push(stamps[a:a + mb], V[a:a + mb])
+                    if len(r.table):
+                        core.rows.extend(r.table)
+                    core.events.extend(r.events)
+                    core.windows.extend(r.windows)
+                    self._after_samples(force_rows=True)
+            if n_ok:
+                self.last_stamp[ru.TOPIC_JOINT_STATES] = int(core.last_ns) if core.last_ns is not None else None
+            self._after_samples()
             self.latency_s.append(time.perf_counter() - t_arrival)
 
-        def _process(self, stamps, V):
+        def _after_samples(self, force_rows: bool = False):
+            """Publish what the core produced: flags first, then rows, diagnostics, windows."""
             core = self.core
-            r = core.push(stamps, V)
-            if len(r.table):
-                self.last_stamp[ru.TOPIC_JOINT_STATES] = int(stamps[-1])
-                self.pub_res.publish(ru.pack_table(RESIDUAL_COLUMNS, r.table))
-                self.n_published[ru.TOPIC_RESIDUALS] += 1
-            for s, lev, why in r.events:
+            for s, lev, why in core.take_events():
                 self.flags.append((self.hardware_id, s, lev, why))
                 self.get_logger().warning(f"{self.hardware_id}: {LEVEL_NAMES[lev]} at stamp {s * 1e-9:.3f} s ({why})")
-            if r.windows:
-                self._publish_windows(r.windows)
             t_now = core.last_ns * 1e-9 if core.last_ns is not None else 0.0
-            if r.level != self.level or t_now - self.last_diag_t >= self.p["diag_period_s"]:
-                self.level = r.level
+            changed = core.level != self.level
+            if changed or t_now - self.last_diag_t >= self.p["diag_period_s"]:
+                self.level = core.level
                 self.last_diag_t = t_now
                 self._publish_status()
+            if changed or force_rows or len(core.rows) >= int(self.p["residual_rows"]):
+                self._flush_rows()
+            if core.window_jobs:
+                self._submit_windows()
+            if self._pending_feat:
+                self._drain_windows()
 
         def _publish_windows(self, windows):
             keys = sorted({k for w in windows for k in w})
@@ -317,6 +397,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
             self.n_published[ru.TOPIC_DIAGNOSTICS] += 1
 
         def _on_timer(self):
+            if self.core is not None and len(self.core.rows):
+                self._flush_rows()
+            if self._pending_feat:
+                self._drain_windows()
             lw = self.last_wall[ru.TOPIC_JOINT_STATES]
             if lw is not None and time.monotonic() - lw > self.p["stale_timeout_s"]:
                 if not getattr(self, "_stale", False):
@@ -327,11 +411,37 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
                 self._stale = False
 
         def _close_mission_windows_only(self):
-            w = self.core.flush()
-            if w:
-                self._publish_windows(w)
+            self._flush_rows()
+            self.core.flush()
+            self._submit_windows(final=True)
+            self._drain_windows(wait=True)
+
+        def destroy_node(self):
+            if self._pool is not None:
+                self._pool.shutdown(wait=True)
+            return super().destroy_node()
 
     return OnboardNode()
+
+
+class _Done:
+    """A finished 'future' (no worker thread)."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def done(self) -> bool:
+        return True
+
+    def result(self):
+        return self.value
+
+
+def _float_or_nan(v) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
 
 
 def _feature_fn(meta: dict, N: float):
@@ -342,11 +452,11 @@ def _feature_fn(meta: dict, N: float):
         return None
     k_t = float(meta.get("torque_constant") or 0.3)
 
-    def fn(stamps_s, V, core):
+    def fn(stamps_s, V, temperature):
         t = stamps_s - stamps_s[0]
-        temp = np.full(len(t), core.temperature)
+        temp = np.full(len(t), temperature) if np.isfinite(temperature) else None
         f = block_features(t, V[:, 0], V[:, 1], V[:, 2], V[:, 3], V[:, 4], V[:, 5], N, k_t,
-                           temp if np.isfinite(core.temperature) else None, None, None, "onboard window")
+                           temp, None, None, "onboard window")
         return {k: v for k, v in f.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
 
     return fn

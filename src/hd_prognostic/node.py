@@ -11,6 +11,12 @@ exposure the sum of the window load-sliding integrals ``W_load`` [J].
 During a mission, every ``publish_period_s`` of wall time, it publishes a
 provisional estimate (a copy of the filter updated with the mission so far).
 
+Mission boundaries: ``/hd/mission`` messages are queued; window rows carry
+the onboard's ``mission_index`` and, on the last window of a mission,
+``final`` = 1. A mission's filter step is committed on its final row (or when
+a row of another mission arrives), so the last windows of a mission that
+arrive after the next ``/hd/mission`` are still counted for the right one.
+
 Publishes ``/hd/prognostic/health`` (Float64MultiArray row, columns
 :data:`HEALTH_COLUMNS`: health indicator h [m] mean/P5/P95, RUL P5/P50/P95
 in missions, risk of failure within ``risk_horizon`` missions, the
@@ -23,6 +29,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections import deque
 import time
 from pathlib import Path
 from typing import Any
@@ -146,6 +153,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
                 self.get_logger().warning(self.obs_problem)
             self.trackers: dict[str, ActuatorTracker] = {}
             self.current: str | None = None
+            self.pending: deque = deque()  # (actuator, mission_index) announced on /hd/mission, not yet current
             self.last: dict[str, dict] = {}
             self.n_published = 0
             self.pub = self.create_publisher(Float64MultiArray, ru.TOPIC_HEALTH, ru.topic_qos(ru.TOPIC_HEALTH))
@@ -166,14 +174,26 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
             except ValueError as e:
                 self.get_logger().error(str(e))
                 return
-            if self.current is not None and self.trackers[self.current].windows:
-                self._publish(self.current, self.trackers[self.current].estimate(final=True))
-            self.current = str(meta.get("actuator_id", "unknown"))
-            tr = self._tracker(self.current)
             try:
-                tr.mission_index = float(meta.get("mission_index", "nan"))
-            except ValueError:
-                tr.mission_index = math.nan
+                mi = float(meta.get("mission_index", "nan"))
+            except (TypeError, ValueError):
+                mi = math.nan
+            self.pending.append((str(meta.get("actuator_id", "unknown")), mi))
+            if self.current is None:
+                self._next_mission()
+
+        def _next_mission(self):
+            act, mi = self.pending.popleft()
+            self.current = act
+            self._tracker(act).mission_index = mi
+
+        def _finalise(self):
+            if self.current is not None:
+                tr = self.trackers[self.current]
+                if tr.windows:
+                    self._publish(self.current, tr.estimate(final=True))
+            self.current = None
+            self._dirty = False
 
         def _on_features(self, msg):
             try:
@@ -181,12 +201,26 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
             except ValueError as e:
                 self.get_logger().error(f"{ru.TOPIC_FEATURES}: {e}")
                 return
-            act = self.current or "unknown"
-            self._tracker(act).add_windows([dict(zip(cols, r.tolist())) for r in rows])
-            self._dirty = True
+            for r in rows:
+                w = dict(zip(cols, r.tolist()))
+                mi = w.get("mission_index", math.nan)
+                if self.current is not None and self.pending and math.isfinite(mi):
+                    cur = self.trackers[self.current].mission_index
+                    if mi != cur and any(m == mi for _, m in self.pending):  # the onboard moved on
+                        self._finalise()
+                if self.current is None:
+                    if self.pending:
+                        self._next_mission()
+                    else:
+                        self.current = "unknown"
+                        self._tracker("unknown")
+                self.trackers[self.current].add_windows([w])
+                self._dirty = True
+                if w.get("final", 0.0) == 1.0:
+                    self._finalise()
 
         def _on_timer(self):
-            if self._dirty and self.current is not None:
+            if self._dirty and self.current is not None and self.trackers[self.current].windows:
                 self._dirty = False
                 self._publish(self.current, self.trackers[self.current].estimate(final=False))
 

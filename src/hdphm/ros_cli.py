@@ -457,9 +457,11 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
         for b in it:
             rep.play(b)
         st.pump(force=True)
+        onb = st.nodes["onboard"]
+        onb.close_mission()  # end of the replay ends the last mission (live: the stale timeout does it)
+        st.pump(force=True)
         wall = time.perf_counter() - t0
         st.spin_for(0.3)
-        onb = st.nodes["onboard"]
         prog = st.nodes.get("prognostic")
         summary = {
             "bags": [str(b) for b in bags],
