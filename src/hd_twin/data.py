@@ -7,15 +7,17 @@ build the twin's input identically.
   :class:`hd_bag.mission.Mission`: columns :data:`RAW_INPUTS` (theta_m rad,
   omega_m rad/s, tau_m N*m, theta_f rad, omega_f rad/s, temperature degC,
   theta_ref rad).
-* :func:`features` -- the network's features from ``X``. Angles are not fed
+* :func:`features` -- the network's features from ``X`` (model rate). Angles are not fed
   raw (an unwrapped theta_m never repeats, so a network cannot generalise on
   it). We feed instead: the output-side twist ``phi = theta_f - theta_m/N``
   (computed in float64, before any float32 cast: it is the small difference of
   two large numbers), ``sin/cos(theta_m)`` and ``sin/cos(2 theta_m)`` (the WG
   orders where kinematic error, cogging and periodic friction live), theta_f
   itself (a flap angle is bounded), the tracking error ``theta_ref -
-  theta_f``, the speeds, tau_m and the temperature. All features are causal
-  and instantaneous, so the streaming runtime computes them sample by sample.
+  theta_f``, the speeds, tau_m, the temperature, and causal backward-difference
+  accelerations of omega_m and omega_f (the inertia torques J theta'' are a
+  large part of Q_red in fast manoeuvres). All features are causal, so the
+  streaming runtime computes them sample by sample (carrying one previous row).
 * Pre-processing (:func:`preprocess`): optional anti-alias filter (causal
   Butterworth, second-order sections, applied identically in batch and
   streaming) and decimation to the model rate ``fs_model``; NaN samples are
@@ -53,6 +55,8 @@ FEATURES = (
     "theta_f",
     "e_ref",
     "temperature",
+    "alpha_m_bd",
+    "alpha_f_bd",
 )
 #: Network outputs: Q_red [N*m], u = x_FS - r_b theta_m [m], y_FS [m].
 OUTPUTS = ("Q_red", "u_FS", "y_FS")
@@ -84,16 +88,24 @@ def mission_inputs(mission) -> np.ndarray:
     return X
 
 
-def features(X: np.ndarray, N: float, fill: np.ndarray | None = None) -> np.ndarray:
-    """Network features ``F[n, 11]`` (float64) from raw inputs ``X[n, 7]``; see the module docstring.
+def features(X: np.ndarray, N: float, dt: float, prev: np.ndarray | None = None,
+             fill: np.ndarray | None = None) -> np.ndarray:
+    """Network features ``F[n, 13]`` (float64) from raw inputs ``X[n, 7]`` at the model rate; see the module docstring.
 
-    ``fill`` (length 11) replaces non-finite feature values (e.g. no
-    temperature sensor, no command yet); by default they stay NaN.
+    ``dt`` [s] is the model sample period, ``prev`` the raw input row before
+    ``X[0]`` (streaming: the last row of the previous block; None at a
+    segment start, where the backward differences are zero). ``fill``
+    (length 13) replaces non-finite feature values (e.g. no temperature
+    sensor, no command yet); by default they stay NaN.
     """
     X = np.asarray(X, dtype=np.float64)
     if X.ndim != 2 or X.shape[1] != len(RAW_INPUTS):
         raise ValueError(f"twin input must have shape (n, {len(RAW_INPUTS)}) with columns {RAW_INPUTS}, got {X.shape}")
+    if not (dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"model sample period dt must be a positive number, got {dt!r}")
     th_m, w_m, tau, th_f, w_f, temp, th_ref = X.T
+    w_prev = X[:1, [1, 4]] if prev is None else np.asarray(prev, dtype=np.float64)[None, [1, 4]]
+    acc = np.diff(np.vstack([w_prev, X[:, [1, 4]]]), axis=0) / dt  # causal backward differences
     F = np.column_stack(
         [
             th_f - th_m / N,
@@ -107,6 +119,8 @@ def features(X: np.ndarray, N: float, fill: np.ndarray | None = None) -> np.ndar
             th_f,
             th_ref - th_f,
             temp,
+            acc[:, 0],
+            acc[:, 1],
         ]
     )
     if fill is not None:
@@ -177,7 +191,7 @@ class Segment:
     N: float
     k_t: float
     X: np.ndarray  # [n, 7] raw inputs (filtered/decimated, NaN bridged)
-    F: np.ndarray  # [n, 11] features (NaN where not computable)
+    F: np.ndarray  # [n, 13] features (NaN where not computable)
     Q_red: np.ndarray  # [n] measured output torque (NaN where absent)
     mask: np.ndarray  # [n] bool: all raw inputs and Q_red were finite before bridging
     theta_m_dd: np.ndarray  # [n] rad/s^2
@@ -248,7 +262,7 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
             Q = np.where(m, Q, np.nan)
         dt = dec / fs
         phi = X[:, 3] - X[:, 0] / N
-        F = features(X, N)
+        F = features(X, N, dt)
         F[:, 9] = np.nan if absent[6] or absent[3] else F[:, 9]  # no command: feature -> training mean
         F[:, 10] = np.nan if absent[5] else F[:, 10]  # no temperature sensor: feature -> training mean
         temp = np.full(len(X), T_ref) if absent[5] else X[:, 5].copy()

@@ -90,7 +90,7 @@ class LambdaC(nn.Module):
 
     def value(self) -> torch.Tensor:
         if self.mode == "fixed":
-            return torch.tensor(self.init)
+            return torch.tensor(self.init, device=self.s.device)
         s = self.s.clamp(-math.log(self.lam_max), -math.log(self.lam_min))
         return torch.exp(-s)
 

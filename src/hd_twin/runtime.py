@@ -67,6 +67,7 @@ class StreamingTwin:
         self._sos = D.antialias_sos(self.fs_in, self.decimation)
         self._zi = None
         self._last = None
+        self._prev = None
         self._phase = 0
         self.h = np.zeros((self.layers, 1, self.hidden), np.float32)
         self.c = np.zeros((self.layers, 1, self.hidden), np.float32)
@@ -112,7 +113,10 @@ class StreamingTwin:
         idx = np.arange((-self._phase) % self.decimation, len(X), self.decimation)
         self._phase = (self._phase + len(X)) % self.decimation
         Xd = Xf[idx]
-        F = D.features(Xd, self.N)
+        if len(Xd) == 0:
+            return {k: np.zeros(0) for k in OUTPUT_NAMES} | {"index": idx}
+        F = D.features(Xd, self.N, self.decimation / self.fs_in, prev=self._prev)
+        self._prev = Xd[-1].copy()
         Z = self.norm.norm_features(F).astype(np.float32)[None]
         y, self.h, self.c = self.session.run(None, {"x": Z, "h0": self.h, "c0": self.c})
         y = y[0].astype(np.float64)

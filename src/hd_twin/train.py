@@ -40,8 +40,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     "paper": dict(layers=3, hidden=512, dropout=0.41873, lr=4.51e-3, lambda_init=8e-2,
                   epochs=60, seq_len=256, stride=128, batch=32, fs_target=None, ramp_epochs=10),
     # CPU/CI-sized: trains in minutes on 2 cores.
-    "small": dict(layers=2, hidden=48, dropout=0.0, lr=6e-3, lambda_init=8e-2,
-                  epochs=25, seq_len=200, stride=100, batch=32, fs_target=250.0, ramp_epochs=5),
+    "small": dict(layers=2, hidden=64, dropout=0.0, lr=5e-3, lambda_init=8e-2,
+                  epochs=20, seq_len=256, stride=256, batch=32, fs_target=250.0, ramp_epochs=4),
     # For unit tests only.
     "tiny": dict(layers=1, hidden=8, dropout=0.0, lr=1e-2, lambda_init=8e-2,
                  epochs=2, seq_len=48, stride=24, batch=8, fs_target=None, ramp_epochs=1),
@@ -79,6 +79,7 @@ class TrainConfig:
     parent: str | None = None  # model this one was derived from (discovery)
     export_onnx: bool = True
     plots: bool = True
+    device: str = "auto"  # "auto" (CUDA when available), "cpu", "cuda"
 
     @classmethod
     def from_preset(cls, name: str, **overrides) -> "TrainConfig":
@@ -190,10 +191,11 @@ def stack_windows(segs: Sequence[D.Segment], norm: D.Normalizer, length: int, st
     return out
 
 
-def _to_torch(batch: dict, sel=None) -> dict:
+def _to_torch(batch: dict, sel=None, device=None) -> dict:
     import torch
 
-    return {k: torch.from_numpy(v if sel is None else v[sel]) for k, v in batch.items()}
+    out = {k: torch.from_numpy(v if sel is None else v[sel]) for k, v in batch.items()}
+    return out if device is None or str(device) == "cpu" else {k: v.to(device) for k, v in out.items()}
 
 
 # ---- evaluation ------------------------------------------------------------------
@@ -345,6 +347,9 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
                       ramp_epochs=cfg.ramp_epochs, washout=cfg.washout)
     pinn = PINN(net, params, cfg.declared_effects, norm.q_mean, norm.q_std, lcfg, cfg.extra_terms)
     physics_on = not (cfg.lambda_mode == "fixed" and cfg.lambda_init == 0)
+    dev = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
+                       ("cpu" if cfg.device == "auto" else cfg.device))
+    pinn.to(dev)
     opt = torch.optim.Adam([{"params": net.parameters(), "weight_decay": cfg.weight_decay},
                             {"params": list(pinn.lam.parameters()), "weight_decay": 0.0}], lr=cfg.lr)
     n_tr = len(Wtr["x"])
@@ -355,14 +360,14 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     hist: dict[str, list] = {k: [] for k in ("epoch", "train_total", "train_data", "train_physics", "val_total",
                                              "val_data", "val_physics", "lambda_c", "ramp", "lr", "time_s")}
     hist["lambda_c_steps"] = []
-    Vt = _to_torch(Wva)
+    Vt = _to_torch(Wva, device=dev)
     for ep in range(cfg.epochs):
         pinn.train()
         perm = rng.permutation(n_tr)
         acc = np.zeros(3)
         for b in range(steps_per_epoch):
             sel = perm[b * cfg.batch:(b + 1) * cfg.batch]
-            batch = _to_torch(Wtr, sel)
+            batch = _to_torch(Wtr, sel, device=dev)
             res = pinn.losses(batch, epoch=ep + b / steps_per_epoch, physics=physics_on)
             opt.zero_grad()
             res["L_tot"].backward()
@@ -391,6 +396,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         if epoch_callback is not None:
             epoch_callback(ep, rec)
     train_time = time.perf_counter() - t0
+    pinn.cpu()
 
     metrics = {
         "validation": evaluate(pinn, va_segs, norm),
@@ -402,6 +408,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         "n_val_samples": int(sum(s.n for s in va_segs)),
         "lambda_c_final": float(pinn.lam.value().detach()),
         "torch_threads": torch.get_num_threads(),
+        "device": str(dev),
         "nrmse_definition": "RMSE / (max - min) of the measured Q_red over the set, in %",
     }
     config = {

@@ -47,11 +47,16 @@ def test_features_twist_precision_and_shapes():
     X2 = X.copy()
     X2[:, 0] += 2 * np.pi * 1e5 * m.meta.gear_ratio
     X2[:, 3] += 2 * np.pi * 1e5
-    F1, F2 = D.features(X, m.meta.gear_ratio), D.features(X2, m.meta.gear_ratio)
+    F1, F2 = D.features(X, m.meta.gear_ratio, 1 / m.fs), D.features(X2, m.meta.gear_ratio, 1 / m.fs)
     np.testing.assert_allclose(F2[:, 0], F1[:, 0], atol=1e-8)
     assert F1.shape == (m.n, len(D.FEATURES))
     with pytest.raises(ValueError, match="shape"):
-        D.features(X[:, :5], 100.0)
+        D.features(X[:, :5], 100.0, 1e-3)
+    # streaming in two blocks gives the same features as one block
+    Fa = D.features(X[:10], m.meta.gear_ratio, 1 / m.fs)
+    Fb = D.features(X[10:], m.meta.gear_ratio, 1 / m.fs, prev=X[9])
+    np.testing.assert_allclose(np.vstack([Fa, Fb]), F1)
+    np.testing.assert_allclose(F1[1:, 11], np.diff(X[:, 1]) * m.fs)
 
 
 def test_preprocess_nan_gaps_and_decimation():
