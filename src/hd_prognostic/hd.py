@@ -201,6 +201,7 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
         "h0_mean": float(np.mean(h0)),
         "h0_std": float(max(np.std(h0), 1e-8)),
         "h_fail": float(np.nanmedian(hf)),
+        "h_fail_std": float(np.nanstd(hf)) if len(hf) > 2 else 0.0,
         "W_median": float(np.median(np.concatenate(Ws))) if Ws else float("nan"),
         "n_train": len(train),
     }
@@ -214,7 +215,8 @@ def build_model(obs: ObservationModel, h_fail: float | None = None, sigma_log_ka
     hf = float(h_fail if h_fail is not None else deg.get("h_fail", obs.h_fail))
     return ArchardWear(h_fail=hf, log_kappa_mean=deg["log_kappa_mean"], log_kappa_std=deg["log_kappa_std"],
                        h0_mean=deg["h0_mean"], h0_std=deg["h0_std"], sigma_proc=deg["sigma_proc"],
-                       sigma_log_kappa=sigma_log_kappa, observe_fn=obs)
+                       sigma_log_kappa=sigma_log_kappa, observe_fn=obs,
+                       h_fail_std=float(deg.get("h_fail_std", 0.0)) if h_fail is None else 0.0)
 
 
 def mission_sequence(a: ActuatorData, obs: ObservationModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -127,6 +127,7 @@ class ArchardWear(DegradationModel):
     sigma_log_kappa: float = 0.02  # random-walk std of ln kappa per step
     observe_fn: ObserveFn | None = None
     time_unit: str = "mission"
+    h_fail_std: float = 0.0  # m, unit-to-unit scatter of the failure wear (random threshold in the RUL)
 
     state_names = ("h", "log_kappa")
     health_index = 0
@@ -167,7 +168,9 @@ class ArchardWear(DegradationModel):
         after j steps when ``kappa * U_j >= h_fail - h`` with ``U_j = sum W_k
         eps_k``; ``n_paths`` cumulative paths U are simulated once and each
         particle follows a random one, so the cost is ``n * steps``
-        comparisons instead of ``n * steps`` model propagations. ``future``:
+        comparisons instead of ``n * steps`` model propagations. With
+        ``h_fail_std > 0`` each particle draws its own failure threshold
+        (the unit's failure wear is not known exactly). ``future``:
         scalar or history array to bootstrap (a callable returns None: use
         the generic stepper).
         """
@@ -175,7 +178,8 @@ class ArchardWear(DegradationModel):
             return None
         fut = np.asarray(future, float)
         n = len(x)
-        D = (self.h_fail - x[:, 0]) / np.exp(x[:, 1])
+        thr = self.h_fail + (self.h_fail_std * rng.standard_normal(n) if self.h_fail_std > 0 else 0.0)
+        D = (thr - x[:, 0]) / np.exp(x[:, 1])
         rul = np.full(n, np.inf)
         rul[D <= 0] = 0.0
         und = np.flatnonzero(D > 0)
