@@ -606,7 +606,25 @@ def cmd_record(args) -> int:
     return 0
 
 
+def _cmd_onboard_eval(args) -> int:
+    from hd_onboard.evaluate import cmd_eval
+
+    return cmd_eval(args)
+
+
 def register(sub) -> None:
+    p = sub.add_parser("onboard", help="onboard detector tools (eval: false-alarm rate over healthy bags)")
+    osub = p.add_subparsers(dest="onboard_command", metavar="ONBOARDCOMMAND")
+    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+    pe = osub.add_parser("eval", help="false alarms of the onboard detector over healthy mission bags")
+    pe.add_argument("paths", nargs="+", help="bags or directories of bags (all taken as healthy)")
+    pe.add_argument("--ground", type=int, default=0,
+                    help="calibrate lines on the first K missions per actuator and score the others (0: self-calibrated)")
+    pe.add_argument("--model-dir", default="", help="trained twin (ONNX); default: physics-only stand-in")
+    pe.add_argument("--out", default="", help="write onboard_eval.json and onboard_eval.png here")
+    pe.add_argument("--quiet", action="store_true")
+    pe.set_defaults(func=_cmd_onboard_eval)
+
     p = sub.add_parser("node", help="run one stack node (onboard, prognostic, ground, twin)")
     p.add_argument("name", choices=NODES)
     p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default $ROS_DOMAIN_ID)")
