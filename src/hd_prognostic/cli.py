@@ -50,8 +50,11 @@ def _prognose(args) -> int:
     a = extract_actuator(args.bag_dir, include_truth=False, progress=True)
     n = len(a.mission_index)
     hist = prognose(a, obs, n_particles=args.particles, seed=args.seed, likelihood=args.likelihood,
-                    snapshots=(max(0, n // 2), max(0, n - 1)), progress=True)
+                    snapshots=() if args.no_plots else (max(0, n // 2), max(0, n - 1)), progress=True)
     _write_history(out, hist)
+    if args.no_plots:
+        print(f"{a.actuator_id}: wrote {out}/rul_history.json and .csv")
+        return 0
     model = build_model(obs)
     for s in hist.meta.get("snapshots", []):
         save_snapshot(out / f"pf_mission{int(s['t'])}.png", s, model, model.h_fail,
@@ -208,6 +211,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--likelihood", choices=("gaussian", "student_t"), default="student_t")
+    p.add_argument("--no-plots", action="store_true", help="write the history only")
     p.set_defaults(func=_prognose)
 
     p = sub.add_parser("metrics", help="score a RUL history against the true end of life")

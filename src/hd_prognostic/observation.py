@@ -65,16 +65,25 @@ class ObservationModel:
         h = x[:, 0] if np.ndim(x) == 2 else x
         return self.mean(h), self.std(h)
 
+    def baselines(self, y: np.ndarray) -> np.ndarray:
+        """Causal baseline per mission: median of the first ``n_baseline`` finite values seen so far."""
+        y = np.asarray(y, float)
+        b = np.full(len(y), np.nan)
+        seen: list[float] = []
+        for k, v in enumerate(y):  # over missions, not samples
+            if np.isfinite(v) and len(seen) < self.n_baseline:
+                seen.append(float(v))
+            if seen:
+                b[k] = float(np.median(seen))
+        return b
+
     def normalise(self, y: np.ndarray) -> np.ndarray:
-        """Apply the per-actuator baseline normalisation to a feature series in mission order."""
+        """Per-actuator baseline normalisation of a feature series in mission order (causal: the node
+        can compute the same value at every mission)."""
         y = np.asarray(y, float)
         if self.baseline == "none" or len(y) == 0:
             return y
-        first = y[: self.n_baseline]
-        first = first[np.isfinite(first)]
-        if len(first) == 0:
-            return np.full_like(y, np.nan)
-        b = float(np.median(first))
+        b = self.baselines(y)
         return y - b if self.baseline == "subtract" else y / b
 
     # ---- fitting --------------------------------------------------------------

@@ -140,8 +140,8 @@ def track(
                 xs, ws = pf.x, w
             r: RULResult = rul_distribution(model, xs, ws, fut, rul_step, max_steps, pf.rng)
             if k in snapshots:
-                _, paths = rul_distribution(model, pf.resampled_particles()[:200], None, fut, rul_step, max_steps,
-                                            pf.rng, keep_paths=200)
+                _, paths = rul_distribution(model, pf.resampled_particles()[:60], None, fut, rul_step, max_steps,
+                                            pf.rng, keep_paths=60)
                 snaps.append({"k": k, "t": float(times[k]), "x": pf.x.copy(), "w": w.copy(), "z": float(obs[k]),
                               "rul": r, "paths": paths, "z_hist": obs[: k + 1].copy(),
                               "t_hist": times[: k + 1].copy()})

@@ -56,13 +56,13 @@ def test_prognose_cli_and_metrics(tmp_path):
     bad.write_bytes(bad.read_bytes()[:200])
     out = tmp_path / "out"
     rc = main(["prognose", str(fleet / "EMA-0001"), "--out", str(out), "--obs-model", str(obs_path),
-               "--particles", "300"])
+               "--particles", "300", "--no-plots"])
     assert rc == 0
     hist = json.loads((out / "rul_history.json").read_text())
     assert hist["t"] == [0.0, 1.0, 2.0, 3.0]
     assert np.isnan(float(hist["z"][2]))  # the skipped mission
     assert any("EMA-0001_m0002.mcap" in e for e in hist["meta"]["skipped_bags"])
-    assert (out / "rul_history.csv").exists() and (out / "state_history.png").exists()
+    assert (out / "rul_history.csv").exists()
     rc = main(["metrics", str(out / "rul_history.json"), "--truth", "10"])
     assert rc == 0
     m = json.loads((out / "metrics.json").read_text())
