@@ -338,6 +338,7 @@ class OnboardCore:
         X[:, I_REF] = self.theta_ref
         # 4. expected response, per segment (reset at dropouts)
         Q_hat = np.empty(n)
+        settle_before = self._settle_until
         cuts = np.flatnonzero(reset_at)
         bounds = [0] + [int(c) for c in cuts if c > 0] + [n]
         if len(cuts) and cuts[0] == 0:
@@ -352,7 +353,9 @@ class OnboardCore:
         r_Q = Q_meas - Q_hat
         Q_for_twist = np.where(np.isfinite(Q_meas), Q_meas, Q_hat)
         twist = (V[:, 1] - V[:, 0] / self.params.N) - Q_for_twist / self.params.K_out
-        evaluate = valid & (t >= self._settle_until)
+        # not evaluated: settle_s after each reset (per sample: a reset late in the block masks only what follows it)
+        settle = np.maximum(settle_before, np.maximum.accumulate(np.where(reset_at, t + cfg.settle_s, -np.inf)))
+        evaluate = valid & (t >= settle)
         r_Q = np.where(evaluate, r_Q, np.nan)
         twist = np.where(evaluate, twist, np.nan)
         # twist zero over the warm-up

@@ -94,7 +94,9 @@ def test_short_path_with_ground_thresholds_detects_fault():
     levels = [core.push_one(s_, v_) for s_, v_ in zip(stamps.tolist(), V.tolist())]
     assert max(levels[:7900]) == OK
     ev = core.take_events()
-    assert ev and 8.0 <= (ev[0][0] - m.t0_ns) * 1e-9 < 8.0 + FAULT_DELAY_S
+    # ground lines from two whole missions are wider than a mission's own warm-up lines: here the
+    # fault shows first on the twist channel, 2.05 s after onset (measured); stated bound: 4 s
+    assert ev and 8.0 <= (ev[0][0] - m.t0_ns) * 1e-9 < 8.0 + 4.0
 
 
 def test_onboard_eval_false_alarm_rate_on_healthy_bags(tmp_path, healthy):
