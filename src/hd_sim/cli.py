@@ -51,7 +51,8 @@ def _fleet(args) -> int:
     s = simulate_fleet(args.actuators, args.missions, args.out, seed=args.seed, effects=effects,
                        duration=args.duration, fs=args.fs, workers=args.workers, n_sub=args.n_sub,
                        profiles=args.profiles.split(","), stop_at_failure=not args.no_stop,
-                       sim_internal_every=args.sim_internal_every, progress=not args.quiet)
+                       sim_internal_every=args.sim_internal_every, progress=not args.quiet,
+                       overrides=dict(_kv(x) for x in args.set))
     n_bags = sum(len(a["missions"]) for a in s["actuators"])
     print(f"wrote {n_bags} bags for {args.actuators} actuators under {args.out}")
     for a in s["actuators"]:
@@ -60,6 +61,14 @@ def _fleet(args) -> int:
               f"(h_fail {a['params']['h_fail'] * 1e6:.1f} um), k_D {a['params']['k_D']:.2e}, "
               f"EOL mission {a['eol_mission']}")
     return 0
+
+
+def _kv(text: str) -> tuple[str, float]:
+    key, sep, val = text.partition("=")
+    try:
+        return key.strip(), float(val)
+    except ValueError:
+        raise SystemExit(f"--set expects KEY=NUMBER, got {text!r}") from None
 
 
 def _effects(args) -> int:
@@ -101,6 +110,8 @@ def register(subparsers) -> None:
                     help="write per-sample /sim/internal ground truth every K missions and the last (1 all, 0 none)")
     pf.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_effect_args(pf)
+    pf.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="actuator parameter for every unit (e.g. mission_hours=400 for shorter lives)")
     pf.set_defaults(func=_fleet)
 
     pe = sub.add_parser("effects", help="list the effect registry with defaults")
