@@ -155,6 +155,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
             self.current: str | None = None
             self.pending: deque = deque()  # (actuator, mission_index) announced on /hd/mission, not yet current
             self.last: dict[str, dict] = {}
+            self.history: dict[str, list[dict]] = {}  # final row of every mission, per actuator
             self.n_published = 0
             self.pub = self.create_publisher(Float64MultiArray, ru.TOPIC_HEALTH, ru.topic_qos(ru.TOPIC_HEALTH))
             self.pub_diag = self.create_publisher(DiagnosticArray, ru.TOPIC_DIAGNOSTICS, ru.qos("diagnostics"))
@@ -227,6 +228,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
         def _publish(self, act: str, est: dict):
             est = dict(est, stamp=time.time())
             self.last[act] = est
+            if est.get("final"):
+                self.history.setdefault(act, []).append(est)
             self.pub.publish(ru.pack_table(HEALTH_COLUMNS, np.array([[float(est.get(c, math.nan)) for c in HEALTH_COLUMNS]])))
             self.n_published += 1
             lev = 1 if self.obs is None else (2 if est.get("risk", 0) > 0.5 else 1 if est.get("risk", 0) > 0.1 else 0)

@@ -164,6 +164,10 @@ class Replayer:
                 self.pub_mission.publish(ru.json_msg(meta))
                 self.n_mission += 1
                 sent_meta = True
+                if self.pump is None:  # across processes: the mission is known before its samples
+                    from rclpy.duration import Duration
+
+                    self.pub_mission.wait_for_all_acked(Duration(seconds=2.0))
                 if self.pump:
                     self.pump(force=True)
             for topic, ln, pay in zip(topics, lt.tolist(), pays):
@@ -217,34 +221,67 @@ class Recorder:
     the graph at its first message; the subscription QoS is adapted like
     ``ros2 bag`` does (best effort if any publisher is best effort,
     transient-local if all publishers are). The first ``/hd/mission`` message
-    becomes the file's ``hd_mission`` metadata record, so a recorded run
-    passes ``hdphm validate``.
+    becomes the file's ``hd_mission`` metadata record.
+
+    One file (default) is a **stack log**: with several missions in it, the
+    contract topics of different missions (often with overlapping stamps)
+    share one channel, so it is not a contract bag of one mission (``hdphm
+    validate`` judges it as one mission and its ``hd_mission`` record names
+    the first only). ``split_per_mission=True`` makes ``out`` a directory
+    and starts a new file ``<actuator_id>_m<mission_index>.mcap`` at every
+    ``/hd/mission`` message: each file is a contract bag of one mission
+    (its own ``hd_mission`` metadata) plus the stack topics received during
+    it, and begins with the last message of every latched topic (twin state,
+    ground report) so it stands alone. The ``/hd/mission`` queue is drained
+    before every contract-topic message is filed, so samples of a new mission
+    never land in the previous file (the replayer waits until its mission
+    message is acknowledged before publishing the samples).
     """
 
+    LATCHED_KEEP = ("/hd/twin/state", "/hd/twin/update", "/hd/ground/report")
+
     def __init__(self, node, out: str | os.PathLike, prefixes=("/hd/", "/diagnostics"), flush_s: float = 0.5,
-                 discover_s: float = 0.25, compression: str = "zstd"):
-        from hd_bag.mcapio import McapFileWriter
+                 discover_s: float = 0.25, compression: str = "zstd", split_per_mission: bool = False):
         from hdphm import rosutil as ru
 
         self.node = node
         self.out = os.fspath(out)
-        Path(self.out).parent.mkdir(parents=True, exist_ok=True)
-        self.w = McapFileWriter(self.out, compression=compression, library="hdphm record")
+        self.split = bool(split_per_mission)
+        self.compression = compression
+        if self.split:
+            if os.path.isfile(self.out):
+                raise ValueError(f"{self.out}: --split-per-mission needs a directory, this is a file")
+            Path(self.out).mkdir(parents=True, exist_ok=True)
+        else:
+            Path(self.out).parent.mkdir(parents=True, exist_ok=True)
         self.prefixes = tuple(prefixes)
         self.subs: dict[str, Any] = {}
         self.types: dict[str, str] = {}
-        self.channels: dict[str, int] = {}
-        self.schemas: dict[str, int] = {}
         self.counts: dict[str, int] = {}
         self.pending: list[tuple[int, int, bytes]] = []
+        self.files: list[str] = []
+        self.latched: dict[str, bytes] = {}
         self.flush_s = float(flush_s)
         self._last_flush = time.monotonic()
-        self.meta_written = False
         self.closed = False
+        self.w = None
+        if not self.split:
+            self._open(self.out)
         for topic, (typ, _) in ru.STACK_TOPICS.items():
             self._subscribe(topic, typ)
         self.timer = node.create_timer(discover_s, self._discover)
         self.flush_timer = node.create_timer(self.flush_s, self._maybe_flush)
+
+    def _open(self, path: str) -> None:
+        from hd_bag.mcapio import McapFileWriter
+
+        self.w = McapFileWriter(path, compression=self.compression, library="hdphm record")
+        self.path = path
+        self.files.append(path)
+        self.channels: dict[str, int] = {}
+        self.schemas: dict[str, int] = {}
+        self._seq: dict[int, int] = {}
+        self.meta_written = False
 
     def _wanted(self, topic: str) -> bool:
         return any(topic == p or topic.startswith(p) for p in self.prefixes)
@@ -270,14 +307,33 @@ class Recorder:
         self.types[topic] = typ
         self.counts[topic] = 0
         sub_holder = {}
+        contract = topic in ru.CONTRACT_TOPICS
 
         def cb(first, topic=topic):
+            if contract and self.split:
+                self._poll_mission()
             msgs = ru.take_all(sub_holder["s"], first)
-            now = time.time_ns()
-            self._on_msgs(topic, msgs, now)
+            self._on_msgs(topic, msgs, time.time_ns())
 
         sub_holder["s"] = self.node.create_subscription(cls, topic, cb, q, raw=True)
         self.subs[topic] = sub_holder["s"]
+
+    def _poll_mission(self) -> None:
+        """File any /hd/mission message already delivered (before the samples that follow it)."""
+        from hdphm import rosutil as ru
+
+        sub = self.subs.get(ru.TOPIC_MISSION)
+        if sub is None:
+            return
+        msgs = []
+        with sub.handle:
+            while True:
+                r = sub.handle.take_message(sub.msg_type, sub.raw)
+                if r is None:
+                    break
+                msgs.append(r[0])
+        if msgs:
+            self._on_msgs(ru.TOPIC_MISSION, msgs, time.time_ns())
 
     def _discover(self) -> None:
         for topic, types in self.node.get_topic_names_and_types():
@@ -304,25 +360,71 @@ class Recorder:
         self.channels[topic] = cid
         return cid
 
+    @staticmethod
+    def _meta_of(payload: bytes) -> dict | None:
+        from rclpy.serialization import deserialize_message
+        from std_msgs.msg import String
+
+        try:
+            meta = json.loads(deserialize_message(payload, String).data)
+            return meta if isinstance(meta, dict) else None
+        except (ValueError, TypeError):
+            return None
+
+    def _rotate(self, meta: dict) -> None:
+        """Close the current file and start the file of the mission ``meta``."""
+        self.flush()
+        if self.w is not None:
+            self.w.close()
+        act = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(meta.get("actuator_id", "unknown")))
+        try:
+            mi = int(float(meta.get("mission_index", 0)))
+        except (TypeError, ValueError):
+            mi = 0
+        base = os.path.join(self.out, f"{act}_m{mi:04d}")
+        path, k = base + ".mcap", 1
+        while os.path.exists(path) or path in self.files:
+            k += 1
+            path = f"{base}_{k}.mcap"
+        pend = self.pending
+        self.pending = []
+        self._open(path)
+        now = time.time_ns()
+        for topic, pay in self.latched.items():  # the file stands alone: latched state first
+            self.pending.append((self._channel(topic), now, pay))
+        # what arrived before the first mission (no file open yet) belongs to the first file
+        self.pending += [(self._channel(t), lt, m) for t, lt, m in pend] if pend and isinstance(pend[0][0], str) else []
+
     def _on_msgs(self, topic: str, msgs: list[bytes], now_ns: int) -> None:
         if self.closed:
             return
-        cid = self._channel(topic)
-        for m in msgs:
-            self.pending.append((cid, now_ns, m))
-        self.counts[topic] += len(msgs)
-        if topic == "/hd/mission" and not self.meta_written:
-            from rclpy.serialization import deserialize_message
-            from std_msgs.msg import String
+        from hdphm import rosutil as ru
 
-            try:
-                meta = json.loads(deserialize_message(msgs[0], String).data)
-                self.w.add_metadata("hd_mission", {k: str(v) for k, v in meta.items() if k != "bag"})
-                self.meta_written = True
-            except (ValueError, TypeError):
-                self.node.get_logger().warning("record: /hd/mission is not JSON; no hd_mission metadata written")
+        self.counts[topic] += len(msgs)
+        if topic == ru.TOPIC_MISSION:
+            for m in msgs:
+                meta = self._meta_of(m)
+                if meta is None:
+                    self.node.get_logger().warning("record: /hd/mission is not JSON; no hd_mission metadata written")
+                elif self.split:
+                    self._rotate(meta)
+                self._file(topic, now_ns, m)
+                if meta is not None and not self.meta_written:
+                    self.w.add_metadata("hd_mission", {k: str(v) for k, v in meta.items() if k != "bag"})
+                    self.meta_written = True
+            return
+        if topic in self.LATCHED_KEEP and msgs:
+            self.latched[topic] = msgs[-1]
+        for m in msgs:
+            self._file(topic, now_ns, m)
         if len(self.pending) >= 20000:
             self.flush()
+
+    def _file(self, topic: str, now_ns: int, m: bytes) -> None:
+        if self.w is None:  # split mode before the first mission: keep by topic name
+            self.pending.append((topic, now_ns, m))
+        else:
+            self.pending.append((self._channel(topic), now_ns, m))
 
     def _maybe_flush(self) -> None:
         if time.monotonic() - self._last_flush >= self.flush_s:
@@ -333,11 +435,10 @@ class Recorder:
         from hd_bag.mcapio import message_records
 
         self._last_flush = time.monotonic()
-        if not self.pending or self.closed:
+        if not self.pending or self.closed or self.w is None:
             return
         pend, self.pending = self.pending, []
-        seq: dict[int, int] = getattr(self, "_seq", {})
-        self._seq = seq
+        seq = self._seq
         by_len: dict[tuple[int, int], list[tuple[int, bytes]]] = {}
         for cid, lt, m in pend:
             by_len.setdefault((cid, len(m)), []).append((lt, m))
@@ -355,9 +456,15 @@ class Recorder:
     def close(self) -> None:
         if self.closed:
             return
+        if self.w is None and self.pending:  # split mode, no mission ever announced
+            pend = self.pending
+            self.pending = []
+            self._open(os.path.join(self.out, "no_mission.mcap"))
+            self.pending = [(self._channel(t), lt, m) for t, lt, m in pend]
         self.flush()
         self.closed = True
-        self.w.close()
+        if self.w is not None:
+            self.w.close()
 
 
 # --------------------------------------------------------------------------
@@ -367,7 +474,8 @@ class Stack:
     """All four nodes (+ optional replayer/recorder node) in one process, one executor."""
 
     def __init__(self, domain_id: int | None = None, overrides: dict[str, dict[str, Any]] | None = None,
-                 nodes: Iterable[str] = NODES, record: str | None = None, args: list[str] | None = None):
+                 nodes: Iterable[str] = NODES, record: str | None = None, args: list[str] | None = None,
+                 split_per_mission: bool = False):
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
@@ -381,7 +489,7 @@ class Stack:
             self.add(name, overrides.get(name))
         self.aux = Node("hdphm_stack_io", context=self.ctx)
         self.ex.add_node(self.aux)
-        self.recorder = Recorder(self.aux, record) if record else None
+        self.recorder = Recorder(self.aux, record, split_per_mission=split_per_mission) if record else None
 
     def add(self, name: str, overrides: dict[str, Any] | None = None):
         node = make_node(name, self.ctx, overrides)
@@ -433,20 +541,42 @@ class Stack:
 def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = None, out_mcap: str | None = None,
                       rate: float | str = "max", domain_id: int | None = None,
                       overrides: dict[str, dict[str, Any]] | None = None, settle_s: float = 0.5,
-                      progress: bool = True) -> dict:
+                      progress: bool = True, obs_model: str | None = None, split_per_mission: bool = False,
+                      archive_dir: str | None = None) -> dict:
     """Replay ``bags`` (in the given order) through twin, onboard, prognostic and ground nodes in one process.
 
+    ``model_dir``: trained twin (ONNX) for the twin core and the onboard node
+    (None: physics-only stand-in); ``obs_model``: the prognostic node's
+    observation model JSON; ``archive_dir``: mission archive the ground node
+    analyses at start (its thresholds/parameters reach the onboard node
+    through the twin core before the replay starts);
+    ``split_per_mission``: ``out_mcap`` is a directory with one contract
+    bag per mission (see :class:`Recorder`).
+
     Returns a summary: per-topic counts published and recorded, flags
-    (actuator, stamp, level, reason), per-actuator last health / RUL, the
-    wall time and the replay speed-up over real time.
+    (actuator, stamp, level, reason), per-actuator last health / RUL and the
+    final row of every mission, the wall time and the replay speed-up over
+    real time.
     """
     overrides = {k: dict(v) for k, v in (overrides or {}).items()}
     if model_dir:
         overrides.setdefault("twin", {})["model_dir"] = str(model_dir)
         overrides.setdefault("onboard", {})["model_dir"] = str(model_dir)
-    st = Stack(domain_id, overrides, record=out_mcap)
+    if obs_model:
+        overrides.setdefault("prognostic", {})["obs_model"] = str(obs_model)
+    if archive_dir:
+        overrides.setdefault("ground", {})["archive_dir"] = str(archive_dir)
+    st = Stack(domain_id, overrides, record=out_mcap, split_per_mission=split_per_mission)
     try:
         st.spin_for(settle_s)  # latched twin state reaches the onboard node
+        if archive_dir:  # the ground analysis runs in a worker thread; wait for its update to be applied
+            gr, tw = st.nodes["ground"], st.nodes["twin"]
+            end = time.monotonic() + 300.0
+            while time.monotonic() < end and gr.n_runs == 0 and gr.error is None:
+                st.spin_for(0.1)
+            if gr.error:
+                raise ValueError(f"ground analysis of {archive_dir} failed: {gr.error}")
+            st.spin_for(0.3)
         rep = Replayer(st.aux, rate, pump=st.pump)
         t0 = time.perf_counter()
         it = bags
@@ -473,6 +603,8 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
             "n_error": sum(1 for f in onb.flags if f[2] == 2),
             "errors": list(onb.errors),
             "health": dict(getattr(prog, "last", {}) or {}),
+            "health_history": {a: list(v) for a, v in (getattr(prog, "history", {}) or {}).items()},
+            "ground_runs": getattr(st.nodes.get("ground"), "n_runs", 0),
             "wall_s": wall,
             "sample_s": rep.sample_seconds,
             "speedup": rep.sample_seconds / wall if wall > 0 else float("nan"),
@@ -483,6 +615,7 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
             st.recorder.flush()
             summary["recorded"] = dict(st.recorder.counts)
             summary["out_mcap"] = st.recorder.out
+            summary["recorded_files"] = list(st.recorder.files)
         return summary
     finally:
         st.close()
@@ -582,7 +715,11 @@ def cmd_record(args) -> int:
 
     ctx = ru.init_context(args.domain_id)
     node = Node("hdphm_record", context=ctx)
-    rec = Recorder(node, args.out, flush_s=args.flush_s)
+    try:
+        rec = Recorder(node, args.out, flush_s=args.flush_s, split_per_mission=args.split_per_mission)
+    except ValueError as e:
+        print(f"hdphm record: {e}", file=sys.stderr)
+        return 2
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     stop = {"v": False}
@@ -601,7 +738,7 @@ def cmd_record(args) -> int:
         rec.close()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
-    print(f"recorded {sum(rec.counts.values())} messages to {args.out}: "
+    print(f"recorded {sum(rec.counts.values())} messages to {len(rec.files)} file(s) under {args.out}: "
           + ", ".join(f"{k} {v}" for k, v in rec.counts.items() if v), file=sys.stderr)
     return 0
 
@@ -649,4 +786,6 @@ def register(sub) -> None:
     p.add_argument("--domain-id", type=int, default=None)
     p.add_argument("--flush-s", type=float, default=0.5, help="chunk flush period (data at risk on a kill)")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: until Ctrl-C/SIGTERM)")
+    p.add_argument("--split-per-mission", action="store_true",
+                   help="--out is a directory; one contract bag per /hd/mission (default: one stack log file)")
     p.set_defaults(func=cmd_record)

@@ -1,0 +1,140 @@
+"""Integration on the real plant simulator: ONNX twin, fitted observation model, ground node, per-mission recording.
+
+One small simulated fleet (module fixture) serves every test: three training
+actuators (the tiny twin is trained and the prognostic observation model is
+fitted on them, as `hdphm train` / `hdphm prognostic fit-obs` would) and a
+fourth actuator whose short life is replayed through the stack.
+"""
+import json
+import os
+import sys
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "onboard"))
+from simfix import faulted_mission, sim_mission  # noqa: E402
+
+from hd_bag import read_mission, validate_bag, write_mission  # noqa: E402
+from hdphm import rosutil as ru  # noqa: E402
+from hdphm.ros_cli import Stack, run_stack_on_bags  # noqa: E402
+
+pytestmark = pytest.mark.ros
+
+#: stated detection delay of a sudden grease loss (lubrication_loss severity 3) through the stack,
+#: the same bound as the core tests (tests/onboard/test_sim_and_short_path.py, measured there)
+FAULT_DELAY_S = 2.0
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory):
+    import torch
+
+    from hd_prognostic.hd import extract_actuator, fit_population
+    from hd_sim import simulate_fleet
+    from hd_twin.train import TrainConfig, train_twin
+
+    torch.set_num_threads(1)
+    d = tmp_path_factory.mktemp("simfleet")
+    simulate_fleet(4, 4, d / "fleet", seed=5, duration=8.0, profiles=("inspection",), progress=False,
+                   sim_internal_every=1)
+    acts = sorted(p for p in (d / "fleet").iterdir() if p.is_dir())
+    train, life = acts[:3], acts[3]
+    obs = fit_population([extract_actuator(a, include_truth=True) for a in train])
+    obs_path = obs.to_json(d / "obs.json")
+    missions = [read_mission(b) for a in train for b in sorted(a.glob("*.mcap"))[:2]]
+    model = d / "twin"
+    train_twin(missions, model, TrainConfig.from_preset("tiny", epochs=2), progress=False)
+    return {"train": [str(a) for a in train], "life": sorted(str(b) for b in life.glob("*.mcap")),
+            "obs": str(obs_path), "model": str(model), "dir": d}
+
+
+def test_life_through_stack_onnx_twin_obs_model_split_recording(fleet, tmp_path, domain_id):
+    """A 4-mission life: ONNX twin onboard, no ERROR on healthy missions, finite RUL P5/P50/P95 per
+    mission, one recorded contract bag per mission that validates and holds that mission's samples."""
+    out = tmp_path / "rec"
+    s = run_stack_on_bags(fleet["life"], fleet["model"], str(out), rate="max", domain_id=domain_id, progress=False,
+                          obs_model=fleet["obs"], split_per_mission=True,
+                          overrides={"prognostic": {"n_particles": 300, "rul_particles": 200}})
+    assert s["twin"] == "onnx_twin" and s["errors"] == []
+    assert s["n_error"] == 0, s["flags"]
+    assert s["received_onboard"] == s["published"]
+    (act, hist), = s["health_history"].items()
+    assert len(hist) == len(fleet["life"])  # one committed filter step per mission
+    assert [h["mission_index"] for h in hist] == list(range(len(fleet["life"])))
+    for h in hist:
+        assert np.isfinite([h["rul_p5"], h["rul_p50"], h["rul_p95"], h["h_mean"], h["risk"]]).all(), h
+        assert h["rul_p5"] <= h["rul_p50"] <= h["rul_p95"]
+    files = s["recorded_files"]
+    assert [os.path.basename(f) for f in files] == [f"{act}_m{k:04d}.mcap" for k in range(len(fleet["life"]))]
+    for f, src in zip(files, fleet["life"]):
+        assert not [v for v in validate_bag(f) if v.severity == "error"], f
+        a, b = read_mission(f), read_mission(src)
+        assert a.n == b.n and a.meta.mission_index == b.meta.mission_index
+        np.testing.assert_array_equal(a.tau_m, b.tau_m)
+    assert sum(s["recorded"].values()) >= sum(s["published"].values())
+
+
+def test_healthy_then_faulted_sim_bags_flags_only_after_onset(fleet, tmp_path, domain_id):
+    h = str(tmp_path / "healthy.mcap")
+    f = str(tmp_path / "fault.mcap")
+    write_mission(h, sim_mission(1, 3, duration=14.0, t0_ns=1_700_000_000_000_000_000))
+    t0 = 1_700_000_100_000_000_000
+    write_mission(f, faulted_mission(10.0, seed=3, actuator=1, duration=14.0, t0_ns=t0))
+    s = run_stack_on_bags([h, f], None, None, domain_id=domain_id, progress=False)
+    assert s["twin"] == "physics_standin"
+    assert s["flags"], "the grease loss was not flagged"
+    first = min(x["stamp_s"] for x in s["flags"])
+    assert 0.0 <= first - (t0 * 1e-9 + 10.0) < FAULT_DELAY_S, first - (t0 * 1e-9 + 10.0)
+
+
+def test_ground_node_recalibrates_and_pushes_thresholds(fleet, tmp_path, domain_id):
+    """The ground node analyses a directory of recorded missions; the twin core applies its update and
+    the onboard node monitors the next mission with the ground's lines."""
+    from std_msgs.msg import String
+
+    arch = tmp_path / "archive"
+    arch.mkdir()
+    for a in fleet["train"][:2]:
+        for b in sorted(os.listdir(a))[:3]:
+            os.symlink(os.path.join(a, b), arch / b)
+    st = Stack(domain_id, nodes=("twin", "onboard", "ground"),
+               overrides={"ground": {"archive_dir": str(arch), "healthy_missions": 2}})
+    reports = []
+    st.aux.create_subscription(String, ru.TOPIC_GROUND_REPORT, lambda m: reports.append(json.loads(m.data)), ru.qos("latched"))
+    try:
+        end = time.monotonic() + 120
+        while time.monotonic() < end and not (reports and st.nodes["onboard"].thresholds_all):
+            st.spin_for(0.1)
+        gr, tw, onb = st.nodes["ground"], st.nodes["twin"], st.nodes["onboard"]
+        assert gr.error is None and gr.n_runs == 1
+        rep = reports[-1]
+        acts = set(rep["actuators"])
+        assert len(acts) == 2 and all(len(rep["actuators"][a]["reference"]) == 2 for a in acts)
+        assert tw.state["revision"] >= 1 and tw.state["updated_by"] == "ground"
+        assert set(tw.state["thresholds"]) == acts and set(onb.thresholds_all) == acts
+        for a in acts:
+            for c, th in onb.thresholds_all[a].items():
+                assert th.source.startswith("ground") and 0 < th.h_warn <= th.h_error and th.sigma > 0
+        # recalibration on the 4 reference missions (sim Q_red measured): least squares fit pushed
+        rc = rep["recalibration"]
+        assert "skipped" not in rc, rc
+        assert rc["rows"] >= 2000 and rc["rms_after"] <= rc["rms_before"]
+        assert tw.state["params"]["source"].startswith("recalibrated") and onb.twin_params.source.startswith("recalibrated")
+        # the next mission of an archived actuator is monitored with the ground's lines
+        from hdphm.ros_cli import Replayer
+
+        a0 = sorted(acts)[0]
+        nxt = [b for t in fleet["train"] for b in sorted(os.listdir(t)) if b.startswith(a0)][3]
+        src = os.path.join([t for t in fleet["train"] if t.endswith(a0)][0], nxt)
+        rep_ = Replayer(st.aux, "max", pump=st.pump)
+        rep_.play(src)
+        st.pump(force=True)
+        assert onb.hardware_id == a0
+        assert {c: d.threshold.source for c, d in onb.core.detectors.items()} == {
+            c: onb.thresholds_all[a0][c].source for c in onb.core.detectors}
+        assert onb.core.calibrated and not onb.errors
+    finally:
+        st.close()
