@@ -1,0 +1,178 @@
+"""``hdphm demo``: the README's main job, end to end.
+
+1. simulate a small fleet of actuators from new to failure (``hd_sim``);
+2. train a ``small`` physics-informed twin on the training actuators and export it to ONNX (``hd_twin``);
+3. fit the prognostic observation model and Archard prior on the training actuators (``hd_prognostic``);
+4. replay the held-out actuator's whole life through the ROS 2 stack (twin core, onboard, prognostic,
+   ground nodes) and record everything to MCAP;
+5. print fault flags, health and RUL, and score the RUL against the simulator's truth.
+
+The held-out actuator is never used to fit anything; its ground truth
+(``fleet_truth.json``) is read only in step 5, to score.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+
+def _say(msg: str) -> None:
+    print(f"[demo] {msg}", flush=True)
+
+
+def _simulate(out: Path, args) -> dict:
+    from hd_sim import simulate_fleet
+
+    truth_path = out / "fleet_truth.json"
+    if truth_path.exists() and not args.fresh:
+        _say(f"1/5 fleet already in {out} (use --fresh to re-simulate)")
+        return json.loads(truth_path.read_text())
+    _say(f"1/5 simulating {args.actuators} actuators, new to failure, {args.duration:g} s inspection missions")
+    return simulate_fleet(args.actuators, args.max_missions, out, seed=args.seed, duration=args.duration,
+                          workers=args.workers, overrides={"mission_hours": args.mission_hours},
+                          sim_internal_every=0, progress=True)
+
+
+def _bags_of(fleet: Path, aid: str) -> list[Path]:
+    return sorted((fleet / aid).glob("*.mcap"))
+
+
+def _train(fleet: Path, train_ids: list[str], out: Path, args) -> dict:
+    from hd_twin.train import TrainConfig, load_missions, train_twin
+
+    if (out / "config.json").exists() and (out / "model.onnx").exists() and not args.fresh:
+        _say(f"2/5 twin already in {out}")
+        return json.loads((out / "metrics.json").read_text()) if (out / "metrics.json").exists() else {}
+    bags = []
+    for aid in train_ids:
+        b = _bags_of(fleet, aid)
+        step = max(1, len(b) // args.twin_bags_per_actuator)
+        bags += b[::step]
+    _say(f"2/5 training the 'small' twin on {len(bags)} missions of {len(train_ids)} training actuators "
+         f"(validation on held-out actuators inside that set)")
+    cfg = TrainConfig.from_preset("small", seed=args.seed, epochs=args.epochs)
+    res = train_twin(load_missions(bags), out, cfg)
+    v = res.metrics["validation"]
+    _say(f"    twin: validation NRMSE {v['nrmse_pct']:.2f} %, R^2 {v['r2']:.4f}, "
+         f"{res.metrics['train_time_s']:.0f} s training")
+    return res.metrics
+
+
+def _fit_obs(fleet: Path, train_ids: list[str], out_json: Path, args):
+    from hd_prognostic.hd import extract_actuator, fit_population
+
+    _say(f"3/5 fitting the observation model and Archard prior on {len(train_ids)} training actuators")
+    train = [extract_actuator(fleet / aid, include_truth=True, cache=out_json.parent / f"features_{aid}.json")
+             for aid in train_ids]
+    obs = fit_population(train)
+    obs.to_json(out_json)
+    return obs
+
+
+def _replay(bags: list[Path], model_dir: Path, obs_json: Path, out_mcap: Path) -> dict:
+    from hdphm.ros_cli import run_stack_on_bags
+
+    _say(f"4/5 replaying {len(bags)} missions of the held-out actuator through the ROS 2 stack -> {out_mcap}")
+    return run_stack_on_bags([str(b) for b in bags], model_dir=str(model_dir), out_mcap=str(out_mcap), rate="max",
+                             overrides={"prognostic": {"obs_model": str(obs_json)}})
+
+
+def _score(fleet: Path, aid: str, obs_json: Path, out: Path, truth: dict, args) -> dict:
+    """Batch prognosis with the same core as the node, scored against the simulator's truth (scoring only)."""
+    from hd_prognostic import metrics as M
+    from hd_prognostic.hd import extract_actuator, prognose
+    from hd_prognostic.observation import ObservationModel
+    from hd_prognostic.plots import save_alpha_lambda
+
+    a = extract_actuator(fleet / aid, include_truth=False)
+    hist = prognose(a, ObservationModel.from_json(obs_json), seed=args.seed)
+    (out / f"rul_history_{aid}.json").write_text(json.dumps(hist.to_json(), indent=1))
+    eol = next(x["eol_mission"] for x in truth["actuators"] if x["actuator_id"] == aid)
+    if eol is None:
+        return {"note": f"{aid} did not reach end of life within {args.max_missions} missions: nothing to score"}
+    m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), alpha=0.2)
+    save_alpha_lambda(out / f"alpha_lambda_{aid}.png", hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), 0.2,
+                      title=f"{aid}: RUL (held-out actuator)", unit="missions")
+    m["eol_mission"] = eol
+    m["last"] = {"t": hist.rul_t[-1], "p5": hist.p5[-1], "p50": hist.p50[-1], "p95": hist.p95[-1]}
+    return m
+
+
+def run_demo(args) -> int:
+    t_start = time.perf_counter()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    fleet = out / "fleet"
+    truth = _simulate(fleet, args)
+    ids = sorted(a["actuator_id"] for a in truth["actuators"])
+    if len(ids) < 3:
+        print("error: the demo needs >= 3 actuators (training ones + one held out)", file=sys.stderr)
+        return 2
+    test_id, train_ids = ids[-1], ids[:-1]
+    twin_metrics = _train(fleet, train_ids, out / "twin", args)
+    obs_json = out / "obs_model.json"
+    _fit_obs(fleet, train_ids, obs_json, args)
+    bags = _bags_of(fleet, test_id)
+    summary = _replay(bags, out / "twin", obs_json, out / f"stack_{test_id}.mcap")
+    _say("5/5 scoring the RUL of the held-out actuator against the simulator's truth (evaluation only)")
+    score = _score(fleet, test_id, obs_json, out, truth, args)
+
+    report = {"held_out_actuator": test_id, "training_actuators": train_ids, "twin": twin_metrics.get("validation"),
+              "stack": {k: summary.get(k) for k in ("n_warn", "n_error", "speedup", "wall_s", "twin", "health",
+                                                     "recorded", "out_mcap", "errors")},
+              "rul_score": score, "wall_s": time.perf_counter() - t_start}
+    (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
+    _print_report(report, summary)
+    return 0
+
+
+def _print_report(rep: dict, summary: dict) -> None:
+    aid = rep["held_out_actuator"]
+    print()
+    print(f"==== hdphm demo report: held-out actuator {aid} ====")
+    tw = rep.get("twin") or {}
+    if tw:
+        print(f"twin (small PINN, ONNX in the onboard node): validation NRMSE {tw.get('nrmse_pct', float('nan')):.2f} %, "
+              f"R^2 {tw.get('r2', float('nan')):.4f}")
+    st = rep["stack"]
+    print(f"stack: expected response from '{st.get('twin')}', replay {st.get('speedup', float('nan')):.1f}x real time, "
+          f"{st.get('n_warn', 0)} WARN and {st.get('n_error', 0)} ERROR flags")
+    flags = summary.get("flags") or []
+    for f in flags[:10]:
+        print(f"  flag level {f['level']} at t={f['stamp_s']:.3f} s: {f['reason']}")
+    if len(flags) > 10:
+        print(f"  ... {len(flags) - 10} more flags")
+    for act, h in (st.get("health") or {}).items():
+        keys = [k for k in ("health_index", "h_mean", "rul_p5", "rul_p50", "rul_p95", "risk") if k in h]
+        print(f"  prognostic node, {act}: " + ", ".join(f"{k} {float(h[k]):.4g}" for k in keys))
+    sc = rep["rul_score"]
+    if "eol_mission" in sc:
+        last = sc["last"]
+        print(f"RUL (batch, same core as the node): at mission {last['t']:.0f} P50 {last['p50']:.1f} missions "
+              f"[P5 {last['p5']:.1f}, P95 {last['p95']:.1f}]; true end of life at mission {sc['eol_mission']}")
+        keys = [k for k in ("alpha_lambda", "fraction_in_cone", "coverage_p5_p95", "cra", "prognostic_horizon") if k in sc]
+        for k in keys:
+            print(f"  {k}: {sc[k]}")
+    else:
+        print(f"RUL: {sc.get('note')}")
+    print(f"recording: {st.get('out_mcap')}; report: report.json; {rep['wall_s']:.0f} s in all")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("demo", help="the main job: simulate -> train small twin -> replay through the ROS 2 stack -> health/RUL")
+    p.add_argument("--out", default="runs/demo", help="output folder (default runs/demo)")
+    p.add_argument("--actuators", type=int, default=5, help="fleet size; the last actuator is held out")
+    p.add_argument("--max-missions", type=int, default=400, help="missions per actuator at most (lives end at failure)")
+    p.add_argument("--duration", type=float, default=4.0, help="inspection mission length, s")
+    p.add_argument("--mission-hours", type=float, default=400.0,
+                   help="operating hours one mission stands for (wear acceleration; larger = shorter lives)")
+    p.add_argument("--twin-bags-per-actuator", type=int, default=12, help="missions per training actuator for the twin")
+    p.add_argument("--epochs", type=int, default=None, help="twin epochs (default: the small preset's)")
+    p.add_argument("--workers", type=int, default=2, help="simulation worker processes")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--fresh", action="store_true", help="recompute every step even if its output exists")
+    p.set_defaults(func=run_demo)
