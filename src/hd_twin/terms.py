@@ -20,7 +20,8 @@ of terms on numpy arrays or, with ``xp=torch``, on torch tensors (so the PINN's
 physics residual can carry the same terms, differentiably).
 
 Basis specs (``signals`` keys: theta_m, theta_f, omega_m, omega_f, tau_m,
-Q_red, temperature, i_q, alpha_m, alpha_f, phi, ...; angles rad, speeds rad/s,
+Q_red, temperature, i_q, alpha_m, alpha_f, phi, windup (= -phi, derived from phi
+when absent), ...; angles rad, speeds rad/s,
 torques N*m, temperature degC, currents A):
 
 ================================================  =============================================
@@ -162,10 +163,18 @@ def _is_tensor(x: Any) -> bool:
 # ---------------------------------------------------------------------------
 
 
+#: Signals derivable from others when a caller does not supply them: name -> (source, factor).
+#: ``windup`` = theta_m/N - theta_f = -phi (input leading; the transmitted torque is +K windup).
+DERIVED_SIGNALS = {"windup": ("phi", -1.0), "windup_dot": ("phi_dot", -1.0)}
+
+
 def _get(signals: Mapping[str, Any], var: str, where: str):
     try:
         return signals[var]
     except KeyError:
+        if var in DERIVED_SIGNALS and DERIVED_SIGNALS[var][0] in signals:
+            src, f = DERIVED_SIGNALS[var]
+            return f * signals[src]
         raise KeyError(
             f"{where}: signal {var!r} is needed but not available; have {sorted(signals)}"
         ) from None

@@ -47,6 +47,7 @@ class Options:
     angle_offset: str = "none"  # "none" | "estimate": per-bag unknown theta_m offset
     calib_frac: float = 0.2  # fraction of each held-out bag used to estimate its offset
     min_samples: int = 1000
+    standstill_sigmas: float = 3.0  # tau_m: rows with |omega_m| below this many speed-noise sigmas are left out
     min_fit_blocks: int = 3
 
 
@@ -109,8 +110,9 @@ def baseline_columns(target: str, avail: set[str], declared: list[str], extra_te
                                                             "v_s": float(twin_params["omega_s"]),
                                                             "delta": float(twin_params.get("delta", 1.0)), "eps": sgn_eps})
     elif target == "Q_red":
-        cols.append(BaselineColumn("K", None, {"op": "var", "var": "phi"}))
-        cols.append(BaselineColumn("c", None, {"op": "var", "var": "phi_dot"}))
+        # Q_red = K (theta_m/N - theta_f) + c (omega_m/N - omega_f): positive stiffness and damping
+        cols.append(BaselineColumn("K", None, {"op": "var", "var": "windup"}))
+        cols.append(BaselineColumn("c", None, {"op": "var", "var": "windup_dot"}))
         known = {}
     else:
         raise DiscoveryError(f"unknown target signal {target!r}; one of tau_m, Q_red")
@@ -348,7 +350,11 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
 
 
 def estimate_offset(terms: list[dict], sig: dict, y_rest: np.ndarray, var: str = "theta_m") -> float:
-    """Offset delta (rad) of ``var`` minimising ||y_rest - terms(var + delta)||^2 (1 deg grid + refinement)."""
+    """Offset delta (rad) of ``var`` minimising ||y_rest - terms(var + delta)||^2 (1 deg grid + refinement).
+
+    Returned in (-pi/g, pi/g], g the greatest common divisor of the terms' integer orders (the offset
+    is defined only modulo 2 pi/g).
+    """
     def sse(d):
         s = dict(sig)
         s[var] = sig[var] + d
@@ -359,12 +365,46 @@ def estimate_offset(terms: list[dict], sig: dict, y_rest: np.ndarray, var: str =
     d0 = grid[int(np.argmin(e))]
     fine = d0 + np.deg2rad(np.linspace(-1, 1, 41))
     e2 = np.array([sse(d) for d in fine])
-    return float(np.mod(fine[int(np.argmin(e2))], 2 * np.pi))
+    d = float(fine[int(np.argmin(e2))])
+    # terms whose orders share a factor g are invariant under a rotation by 2 pi / g: the offset is only
+    # defined modulo that period; report the representative of smallest magnitude (minimal rotation)
+    orders = [float(t.get("order")) for t in terms if t.get("order") is not None]
+    g = 1
+    if orders and all(o.is_integer() and o > 0 for o in orders):
+        g = int(np.gcd.reduce([int(o) for o in orders]))
+    period = 2 * np.pi / max(g, 1)
+    return float((d + period / 2) % period - period / 2)
 
 
 # ---------------------------------------------------------------------------
 # the pipeline for one target signal
 # ---------------------------------------------------------------------------
+
+
+def speed_noise_sigma(omega: np.ndarray, segment: np.ndarray) -> float:
+    """Robust white-noise sigma of a measured speed, rad/s (MAD of second differences within segments).
+
+    A second difference removes smooth motion (up to its curvature); white noise of sigma s gives a
+    second difference of sigma sqrt(6) s.
+    """
+    d2 = omega[2:] - 2 * omega[1:-1] + omega[:-2]
+    same = (segment[2:] == segment[:-2])
+    d2 = d2[same & np.isfinite(d2)]
+    if len(d2) < 10:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def standstill_rows(ds: Dataset, n_sigmas: float) -> tuple[np.ndarray, float]:
+    """Rows where the direction of motion is not observable: |omega_m| < n_sigmas x speed-noise sigma.
+
+    There the friction torque is anywhere in the stiction band and the measured sgn(omega_m) is noise,
+    so no friction model (declared or candidate) can be scored on them. Returns (mask, threshold rad/s).
+    """
+    w = ds.signals["omega_m"]
+    sig = max(speed_noise_sigma(w[ds.bag == b], ds.segment[ds.bag == b]) for b in np.unique(ds.bag))
+    thr = n_sigmas * sig
+    return np.abs(w) < thr, thr
 
 
 def _err(r: np.ndarray, y: np.ndarray) -> dict:
@@ -398,8 +438,19 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     avail = {k for k, v in sig.items() if np.std(v) > 0}
     if target not in sig:
         raise DiscoveryError(f"target signal {target} is not measured in {ds.bag_names}")
-    fit = ~heldout
     statements: list[str] = []
+    still_note: list[str] = []
+    if target == "tau_m" and opt.standstill_sigmas > 0 and "omega_m" in sig:
+        still, thr = standstill_rows(ds, opt.standstill_sigmas)
+        if still.any() and still.mean() < 0.9:
+            still_note.append(
+                f"{int(still.sum())} of {ds.n} samples ({still.mean():.0%}) at standstill (|omega_m| < {thr:.3g} rad/s "
+                f"= {opt.standstill_sigmas:g} x the speed-noise sigma) left out of fit and scoring: the friction "
+                "direction is not observable there")
+            ds = ds.subset(~still)
+            heldout = heldout[~still]
+            sig = ds.signals
+    fit = ~heldout
     empty = dict(signal=target, declared_before=declared, declared_after=list(declared), baseline_params={},
                  refit_baseline_params={}, effects=[], terms=[], error_before={}, error_after={})
     n_fit_blocks = len(np.unique(ds.block[fit]))
@@ -408,11 +459,16 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             f"too little data: {int(fit.sum())} fit samples in {n_fit_blocks} blocks and {int(heldout.sum())} held-out "
             f"samples (need >= {opt.min_samples} fit samples in >= {opt.min_fit_blocks} blocks and "
             f">= {opt.min_samples // 4} held out); nothing can be identified reliably")
-        return SignalResult(identifiable=False, statements=statements, **empty)
+        return SignalResult(identifiable=False, statements=statements + still_note, **empty)
+    statements += still_note
 
     sf = {k: v[fit] for k, v in sig.items()}
     scale = float(np.quantile(np.abs(sf["omega_m"]), 0.9))
-    sgn_eps = max(1e-3 * scale, 1e-5)  # near-hard sign: smoothing only below 0.1 % of the speed scale
+    # near-hard sign: smoothing only below 0.1 % of the speed scale and never wider than the speed noise
+    # (a wider tanh would model a viscous-like ramp the friction does not have)
+    sig_w = max(speed_noise_sigma(sf["omega_m"][ds.bag[fit] == b], ds.segment[fit][ds.bag[fit] == b])
+                for b in np.unique(ds.bag[fit]))
+    sgn_eps = max(min(1e-3 * scale, sig_w) if sig_w > 0 else 1e-3 * scale, 1e-5)
     excluded, st, ok = identifiability(sf, target, avail)
     statements += st
     if not ok:

@@ -88,8 +88,12 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02) -> tuple[dic
     s["alpha_m"] = _derivative(s["omega_m"], m.t, seg, deriv_window_s)
     if np.any(np.isfinite(s["Q_red"])):
         s["Q_red_over_N"] = s["Q_red"] / N
-    s["phi"] = s["theta_f"] - s["theta_m"] / N
+    s["phi"] = s["theta_f"] - s["theta_m"] / N  # output-side twist (hd_twin.physics convention), rad
     s["phi_dot"] = s["omega_f"] - s["omega_m"] / N
+    # wind-up: input leading the output; the transmitted torque is + K windup (PHYSICS.md 1.2:
+    # delta_m = ... - r_m phi), so K and c come out positive
+    s["windup"] = -s["phi"]
+    s["windup_dot"] = -s["phi_dot"]
     temp = m.temperature_on_t("gearbox")
     if np.any(np.isfinite(temp)):
         s["temperature"] = temp

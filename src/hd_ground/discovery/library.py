@@ -201,13 +201,23 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                 variants.append(("sgn", _sgn(ctx), f"F_{ks} sin({ks} {var} + rho_{ks}) sgn(omega_m)", "F"))
             if ctx.target == "tau_m" and "i_q" in ctx.available and var == "theta_m":
                 variants.append(("iq", {"op": "var", "var": "i_q"}, f"k_t r_{ks} i_q sin({ks} {var} + psi_{ks})", "k_t_r"))
-            if ctx.target == "Q_red" and "phi" in ctx.available and var == "theta_m":
-                variants.append(("twist", {"op": "var", "var": "phi"}, f"K eps_{ks} phi cos({ks} {var} + psi_{ks})", "K_eps"))
+            if ctx.target == "Q_red" and "windup" in ctx.available and var == "theta_m":
+                variants.append(("twist", {"op": "var", "var": "windup"},
+                                 f"K eps_{ks} w cos({ks} {var} + psi_{ks}), w = theta_m/N - theta_f", "K_eps"))
             for variant, times, form, pname in variants:
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, variant), fam, var, float(k),
                     sin_cos_pair(var, float(k), times), form, _harm_params(pname, k),
                     requires=tuple({var} | ({times["var"]} if times and "var" in times else set())),
+                ))
+            if ctx.target == "Q_red" and "windup" in ctx.available and var == "theta_m" and float(k).is_integer():
+                # load-dependent amplitude of the same ripple (e.g. the KE's A_k(1 + a_T |T|/T_rated)): an
+                # additional group in its own family, so that it can join the plain ripple, never replace it
+                out.append(Candidate(
+                    _periodic_name(ctx.target, var, k, "plain"), f"{fam}:load", var, float(k),
+                    sin_cos_pair(var, float(k), {"op": "abs", "var": "windup"}),
+                    f"K a_{ks} |w| sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (load-dependent amplitude)",
+                    _harm_params("K_a", k), requires=(var, "windup"),
                 ))
     return out
 
@@ -222,12 +232,12 @@ def transmission_candidates(ctx: LibraryContext) -> list[Candidate]:
     if ctx.target != "Q_red":
         return []
     return [
-        Candidate("nonlinear_stiffness", "stiffness", "phi", None,
-                  [{"op": "pow", "var": "phi", "p": 3.0}], "k3 phi^3", lambda c: {"k3": float(c[0])},
-                  requires=("phi",)),
-        Candidate("hysteresis", "hysteresis", "phi", None,
-                  [{"op": "sgn", "var": "phi_dot", "eps": 0.0}], "T_h sgn(phi')",
-                  lambda c: {"T_h": float(c[0])}, requires=("phi_dot",)),
+        Candidate("nonlinear_stiffness", "stiffness", "windup", None,
+                  [{"op": "pow", "var": "windup", "p": 3.0}], "k3 w^3, w = theta_m/N - theta_f",
+                  lambda c: {"k3": float(c[0])}, requires=("windup",)),
+        Candidate("hysteresis", "hysteresis", "windup", None,
+                  [{"op": "sgn", "var": "windup_dot", "eps": 0.0}], "T_h sgn(w'), w = theta_m/N - theta_f",
+                  lambda c: {"T_h": float(c[0])}, requires=("windup_dot",)),
         Candidate("unknown", "bias", None, None, [{"op": "const"}], "c_0", lambda c: {"c_0": float(c[0])}),
     ]
 

@@ -1,0 +1,276 @@
+"""Discovery on the real simulator: one undeclared effect at a time (and a pair), error before/after.
+
+``hdphm bench discover [--extra --duration 8 --bags 3 --out runs/discover_sim --cases ppf2,...]``
+(or ``python bench/bench_discover.py ...``) makes, for every case, a few
+mission bags with ``hd_sim`` (the basic-twin baseline preset: realistic sensor
+noise, encoder quantisation and gusts on; plus exactly the case's effect),
+runs ``hd_ground.discovery.run_discovery`` on them (fit on the first bags,
+held out: the last bag, whole), and prints the results table of
+``src/hd_ground/discovery/README.md``: found name / variable / order, the
+parameter errors against the truth and the held-out RMSE before and after.
+
+The truth comes from the bags' ``/sim/effects`` record and is read here, by
+the evaluation only; discovery never sees it. ``tests/ground/test_discovery_sim.py``
+imports this module for its cases and checks.
+
+Acquisition: the simulator is run at 4 kHz (25 us internal step, as its
+1 kHz default) and the bag holds 1 kHz samples, each the mean of four
+(angles: the first), as a drive that samples at 4 kHz and logs averaged
+1 kHz data. Reason: ``hd_sim`` holds the position command for a whole log
+period and logs instantaneous values at the same instant, so its native
+1 kHz logs carry a 1 kHz command-staircase current ripple sampled at a fixed
+phase (aliased to ~0 Hz, about 0.6 N*m of speed-correlated bias on tau_m);
+no real logger sees that. Reported to the simulator's owner.
+"""
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+#: Acquisition: simulate at FS_SIM, log FS_SIM / DECIM (block means).
+FS_SIM = 4000.0
+N_SUB = 10
+DECIM = 4
+POP_SEED = 7  # actuator population seed (unit 0: random harmonic phases, unit-to-unit spread)
+
+
+@dataclass
+class Case:
+    id: str
+    on: tuple[str, ...]
+    params: dict = field(default_factory=dict)
+    t_amb: tuple[float, ...] | None = None  # per bag ambient temperature (degC); None: the profile's random one
+    expect: tuple[tuple[str, str, str, float | None], ...] = ()  # (signal, name, variable, order) that must be found
+    tested: bool = True  # part of the test suite (False: reported in the table only)
+    note: str = ""
+
+
+CASES = [
+    Case("baseline", (), expect=(), note="basic-twin baseline only: sensor noise, quantisation, gusts"),
+    Case("position_periodic_friction", ("position_periodic_friction",),
+         {"position_periodic_friction.order": 2, "position_periodic_friction.F2": 0.8},
+         expect=(("tau_m", "position_periodic_friction", "theta_m", 2.0),)),
+    Case("position_periodic_torque", ("position_periodic_torque",),
+         {"position_periodic_torque.P1": 0.6, "position_periodic_torque.P2": 0.0},
+         expect=(("tau_m", "position_periodic_torque", "theta_m", 1.0),)),
+    Case("stribeck_friction", ("stribeck_friction",), {"stribeck_friction.ratio": 2.5},
+         expect=(("tau_m", "stribeck_friction", "omega_m", None),)),
+    Case("temperature_dependent_friction", ("temperature_dependent_friction",), {},
+         t_amb=(-25.0, 5.0, 35.0), expect=(("tau_m", "temperature_dependent_friction", "temperature", None),)),
+    Case("kinematic_error_harmonic", ("kinematic_error_harmonic",), {"kinematic_error_harmonic.order": 2},
+         expect=(("Q_red", "kinematic_error_harmonic", "theta_m", 2.0),)),
+    Case("pair_ppf2_ppt1", ("position_periodic_friction", "position_periodic_torque"),
+         {"position_periodic_friction.order": 2, "position_periodic_friction.F2": 0.8,
+          "position_periodic_torque.P1": 0.6, "position_periodic_torque.P2": 0.0},
+         expect=(("tau_m", "position_periodic_friction", "theta_m", 2.0),
+                 ("tau_m", "position_periodic_torque", "theta_m", 1.0))),
+    Case("load_dependent_friction", ("load_dependent_friction",), {},
+         expect=(("tau_m", "load_dependent_friction", "Q_red", None),), tested=False,
+         note="not found: see README"),
+    Case("cogging_torque", ("cogging_torque",), {}, expect=(("tau_m", "cogging_torque", "theta_m", 60.0),),
+         tested=False, note="order 60 above the angle-domain Nyquist order of 1 kHz logs at speed"),
+]
+CASE_BY_ID = {c.id: c for c in CASES}
+
+
+def _decimate(m, q: int):
+    from hd_bag.mission import Mission
+
+    n = (m.n // q) * q
+    avg = lambda x: np.asarray(x[:n], float).reshape(-1, q).mean(1)  # noqa: E731
+    sub = lambda x: np.asarray(x[:n:q])  # noqa: E731
+    return Mission(m.meta, sub(m.t), sub(m.theta_m), sub(m.theta_f), avg(m.omega_m), avg(m.omega_f), avg(m.tau_m),
+                   avg(m.Q_red), np.asarray(m.t_cmd), np.asarray(m.theta_ref), m.temperatures, m.t0_ns)
+
+
+def make_case_bags(case: Case, out_dir: str | Path, *, n_bags: int = 3, duration: float = 8.0, seed: int = 100,
+                   log=print) -> list[str]:
+    """Simulate ``n_bags`` inspection missions of one actuator for ``case`` and write contract bags.
+
+    Each bag carries ``/sim/effects`` (the truth, for the evaluation only).
+    """
+    from hd_bag import write_mission
+    from hd_sim import EffectSet, sample_population, simulate_mission
+
+    eff = EffectSet.baseline().with_on(*case.on).with_params(**case.params) if case.on else EffectSet.baseline()
+    unit = sample_population(1, POP_SEED)[0]
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i in range(n_bags):
+        t_amb = None if case.t_amb is None else case.t_amb[i % len(case.t_amb)]
+        m, truth = simulate_mission(unit, eff, "inspection", seed + i, duration=duration, fs=FS_SIM, n_sub=N_SUB,
+                                    T_amb=t_amb, mission_index=i)
+        m = _decimate(m, DECIM)
+        p = out / f"{case.id}_{i}.mcap"
+        write_mission(p, m, sim={"effects": truth["effects"]})
+        paths.append(str(p))
+    log(f"{case.id}: {n_bags} bags of {duration:g} s in {out}")
+    return paths
+
+
+def read_truth(path: str) -> dict:
+    """The ``/sim/effects`` record of a bag (evaluation only)."""
+    from hd_bag import read_mission
+
+    m = read_mission(path, include_sim=True)
+    t = m.sim.get("/sim/effects")
+    return json.loads(t) if isinstance(t, str) else t
+
+
+def _wrap(a: float) -> float:
+    return float((a + math.pi) % (2 * math.pi) - math.pi)
+
+
+def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -> list[dict]:
+    """Found vs true parameters of the expected effects: [{param, found, truth, err, tol, ok}].
+
+    ``err`` is relative for amplitudes/slopes, absolute (rad, wrapped) for phases. Conventions of the
+    simulator (PHYSICS.md): tau_m = ... + T_fric + T_pos (both as A sin(k theta_m + phase)), and
+    the kinematic error enters the output torque as K theta_KE with theta_KE = A2 sin(2 theta_m + psi2).
+    """
+    P = truth["params"]
+    found: dict = {}
+    for e in rep["effects"]:  # best first: the first entry of a key is its main term
+        found.setdefault((e["signal"], e["name"], e["variable"], e["order"]), e)
+    out = []
+
+    def add(param, f, t, tol, phase=False):
+        err = abs(_wrap(f - t)) if phase else abs(f - t) / max(abs(t), 1e-300)
+        out.append({"param": param, "found": float(f), "truth": float(t), "err": float(err), "tol": tol,
+                    "ok": bool(err <= tol)})
+
+    for key in case.expect:
+        e = found.get(key)
+        if e is None:
+            continue
+        pr = e["parameters"]
+        name = key[1]
+        if name == "position_periodic_friction":
+            add("F_2 [N*m]", pr["F_2"], P["F2"], 0.10)
+            add("phase_2 [rad]", pr["phase_2"], P["rho2"], 0.10, phase=True)
+        elif name == "position_periodic_torque":
+            add("A_1 [N*m]", pr["A_1"], P["P1"], 0.10)
+            add("phase_1 [rad]", pr["phase_1"], P["phi_p1"], 0.10, phase=True)
+        elif name == "stribeck_friction":
+            # (omega_s, delta) trade off against each other on finite data: compare the curve itself
+            dT = (P["T_S_ratio"] - 1.0) * P["T_C"]
+            w = np.geomspace(0.3, 3.0, 50) * P["omega_s"]
+            true_c = dT * np.exp(-((w / P["omega_s"]) ** P["delta_s"]))
+            f_c = pr["T_S_minus_T_C"] * np.exp(-((w / pr["omega_s"]) ** pr["delta"]))
+            add("T_S - T_C [N*m]", pr["T_S_minus_T_C"], dT, 0.25)
+            out.append({"param": "Stribeck curve, max error over 0.3-3 omega_s / (T_S - T_C)",
+                        "found": float(np.max(np.abs(f_c - true_c)) / dT), "truth": 0.0,
+                        "err": float(np.max(np.abs(f_c - true_c)) / dT), "tol": 0.2,
+                        "ok": bool(np.max(np.abs(f_c - true_c)) / dT <= 0.2)})
+        elif name == "temperature_dependent_friction":
+            # truth: T_C(T) = T_C exp(-beta n_c (T - T_ref)); its least-squares slope over the fit bags' temperatures
+            from hd_bag import read_mission
+
+            T = np.concatenate([read_mission(p).temperature_on_t("gearbox") for p in fit_paths])
+            tc = P["T_C"] * np.exp(-P["nu_beta"] * P["n_c"] * (T - P["T_ref"]))
+            slope = float(np.polyfit(T, tc, 1)[0])
+            add("dT_C/dT [N*m/K]", pr["dT_C_dT"], slope, 0.25)
+        elif name == "kinematic_error_harmonic":
+            sig = next(s for s in rep["signals"] if s["signal"] == "Q_red")
+            K = sig["refit_baseline_parameters"]["K"]
+            from hd_bag import read_mission
+
+            Q = np.concatenate([read_mission(p).Q_red for p in fit_paths])
+            load = next((x for x in rep["effects"] if x is not e and (x["signal"], x["name"], x["order"]) ==
+                         (key[0], key[1], key[3]) and "K_a_2" in x["parameters"]), None)
+            if load is None:  # one amplitude: compare with the mean of A2 (1 + a_T |T|/T_rated) over the fit data
+                A2_eff = P["A2"] * (1.0 + P["a_T"] * float(np.nanmean(np.abs(Q))) / P["T_rated"])
+                add("A_2 / K [rad]", pr["A_2"] / K, A2_eff, 0.20)
+            else:  # K theta_KE = K A2 sin(.) + K A2 a_T (K |w|) / T_rated sin(.): both parts
+                add("A_2 / K [rad]", pr["A_2"] / K, P["A2"], 0.20)
+                add("K_a_2 / K^2 [rad/(N*m)]", load["parameters"]["K_a_2"] / K**2, P["A2"] * P["a_T"] / P["T_rated"], 0.35)
+            add("phase_2 [rad]", pr["phase_2"], P["psi2"], 0.10, phase=True)
+            add("K [N*m/rad]", K, P["K_out_lin"], 0.10)
+    return out
+
+
+def evaluate_case(case: Case, paths: list[str], out_dir: str | Path, *, plots: bool = False,
+                  within_bag_check: bool = False, log=lambda s: None) -> dict:
+    """Run discovery (held out: the last bag) and score it against the truth; returns a table row."""
+    from hd_ground.discovery.pipeline import run_discovery
+
+    t0 = time.perf_counter()
+    rep = run_discovery(paths, out_dir, heldout=[paths[-1]], plots=plots, within_bag_check=within_bag_check, log=log)
+    dt = time.perf_counter() - t0
+    truth = read_truth(paths[0])
+    found_keys = list(dict.fromkeys((e["signal"], e["name"], e["variable"], e["order"]) for e in rep["effects"]))
+    missing = [k for k in case.expect if k not in found_keys]
+    extra = [k for k in found_keys if k not in case.expect]
+    checks = parameter_checks(case, rep, truth, paths[:-1])
+    sig = case.expect[0][0] if case.expect else "tau_m"
+    s = next((x for x in rep["signals"] if x["signal"] == sig), rep["signals"][0])
+    eb, ea = s["error_before"], s["error_after"]
+    return {"case": case.id, "report": rep, "found": found_keys, "missing": missing, "extra": extra,
+            "checks": checks, "signal": sig, "rmse_before": eb.get("rmse"), "rmse_after": ea.get("rmse"),
+            "halved": bool(ea.get("rmse", np.inf) <= 0.5 * eb.get("rmse", 0.0)), "seconds": dt}
+
+
+def _fmt_key(k) -> str:
+    o = "" if k[3] is None else f", order {k[3]:g}"
+    return f"{k[1]} ({k[2]}{o})"
+
+
+def format_table(rows: list[dict]) -> str:
+    lines = ["| case | found (variable, order) | parameter error (tolerance) | signal | held-out RMSE before | after | "
+             "verdict |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        c = CASE_BY_ID[r["case"]]
+        found = "; ".join(_fmt_key(k) for k in r["found"]) or "none"
+        pe = "; ".join(f"{x['param']}: {x['err']:.3g} ({x['tol']:g})" for x in r["checks"]) or "-"
+        ok = (not r["missing"] and not r["extra"] and all(x["ok"] for x in r["checks"])
+              and (r["halved"] if c.expect else r["rmse_after"] == r["rmse_before"]))
+        verdict = "pass" if ok else ("FAIL" if c.tested else "not found (untested)" if r["missing"] else "FAIL (untested)")
+        lines.append(f"| {r['case']} | {found} | {pe} | {r['signal']} | {r['rmse_before']:.4g} | {r['rmse_after']:.4g} | "
+                     f"{verdict} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="bench_discover", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--duration", type=float, default=8.0, help="mission length per bag, s")
+    ap.add_argument("--bags", type=int, default=3, help="bags per case (the last is held out)")
+    ap.add_argument("--out", default="runs/discover_sim")
+    ap.add_argument("--cases", default=",".join(c.id for c in CASES))
+    ap.add_argument("--seed", type=int, default=100)
+    ap.add_argument("--plots", action="store_true", help="write discovery's PNGs per case")
+    a = ap.parse_args(argv)
+    ids = [s for s in a.cases.split(",") if s]
+    bad = [i for i in ids if i not in CASE_BY_ID]
+    if bad:
+        print(f"unknown case(s) {bad}; one of {list(CASE_BY_ID)}", file=sys.stderr)
+        return 2
+    if a.bags < 2 or not (1.0 <= a.duration <= 600.0):
+        print("--bags must be >= 2 and --duration in [1, 600] s", file=sys.stderr)
+        return 2
+    rows = []
+    for i, cid in enumerate(ids):
+        case = CASE_BY_ID[cid]
+        print(f"[{i + 1}/{len(ids)}] {cid}: simulating ...", flush=True)
+        paths = make_case_bags(case, Path(a.out) / cid / "bags", n_bags=a.bags, duration=a.duration, seed=a.seed,
+                               log=lambda s: None)
+        r = evaluate_case(case, paths, Path(a.out) / cid / "discovery", plots=a.plots, within_bag_check=True)
+        rows.append(r)
+        print(f"    found {r['found'] or 'none'}; RMSE {r['rmse_before']:.4g} -> {r['rmse_after']:.4g} N*m "
+              f"({r['seconds']:.1f} s)", flush=True)
+    print()
+    print(format_table(rows))
+    ratios = [r["rmse_after"] / r["rmse_before"] for r in rows if CASE_BY_ID[r["case"]].expect and r["rmse_before"]]
+    if ratios:
+        print(f"\nmedian held-out RMSE ratio after/before over effect cases: {np.median(ratios):.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
