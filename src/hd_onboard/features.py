@@ -28,7 +28,9 @@ nominal law misses. One least-squares fit per block separates them::
   ``i_q = a sgn(w) + g w f_T + (J/k_t) w' + c Q + d`` with ``f_T =
   exp(-beta_T (T_h - T_ref))`` (viscous friction follows the lubricant
   viscosity, PHYSICS.md 2.5 and 3.4), so g is the gain at ``T_ref``:
-  temperature-compensated. Also ``cs_rms_ratio`` = RMS(i_q)/RMS(omega_m).
+  temperature-compensated. Also ``cs_coulomb`` = |a| [A] (the Coulomb
+  friction current, which grows with mesh wear) and ``cs_rms_ratio`` =
+  RMS(i_q)/RMS(omega_m).
 * ``efficiency`` = sum(Q w_f) / sum(tau_m w_m) over motoring samples.
 * ``W_load`` [J]: the Archard load-sliding integral ``int |Q| |omega_m| dt``
   of the block (mean power over the valid samples times the block
@@ -49,7 +51,7 @@ import numpy as np
 
 FEATURE_NAMES = (
     "HF_MTW_IF", "ke_2x", "ke_1x", "ke_4x", "lost_motion", "hysteresis", "compliance_residual", "te_rms",
-    "ke_indicator", "cs_gain", "cs_rms_ratio", "efficiency", "W_load",
+    "ke_indicator", "cs_gain", "cs_coulomb", "cs_rms_ratio", "efficiency", "W_load",
 )
 
 
@@ -229,6 +231,7 @@ def block_features(
         scale[scale == 0] = 1.0
         coef, *_ = np.linalg.lstsq(A / scale, i_q[okc], rcond=None)
         out["cs_gain"] = float(coef[1] / scale[1])
+        out["cs_coulomb"] = float(abs(coef[0] / scale[0]))
         out["cs_rms_ratio"] = float(np.sqrt(np.mean(i_q[okc] ** 2)) / max(np.sqrt(np.mean(w**2)), 1e-12))
     else:
         notes.append("not enough valid current/speed samples for cs_gain")

@@ -23,7 +23,7 @@ from hd_prognostic.observation import ObservationModel
 from hd_prognostic.rul import rul_distribution
 
 STUDY_FEATURES = ("HF_MTW_IF", "ke_2x", "ke_1x", "ke_4x", "lost_motion", "hysteresis", "te_rms", "ke_indicator",
-                  "compliance_residual", "cs_gain", "cs_rms_ratio", "efficiency")
+                  "compliance_residual", "cs_gain", "cs_coulomb", "cs_rms_ratio", "efficiency")
 
 
 def _extract_one(args):

@@ -109,7 +109,10 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
     from hd_onboard.features import mission_features
 
     bags = find_bags(bag_dir)
-    key = [[str(b), b.stat().st_size, b.stat().st_mtime_ns] for b in bags] + [include_truth]
+    from hd_onboard import features as _feat
+
+    key = [[str(b), b.stat().st_size, b.stat().st_mtime_ns] for b in bags] + [include_truth,
+                                                                            list(_feat.FEATURE_NAMES)]
     if cache and Path(cache).exists():
         try:
             d = json.loads(Path(cache).read_text())

@@ -189,6 +189,9 @@ def score_history(t, p50, p5, p95, t_eol: float, *, t_p: float | None = None, al
     omitted and PH uses the median.
     """
     t, p50, p5, p95 = _arr(t), _arr(p50), _arr(p5), _arr(p95)
+    # "no failure within the forecast horizon" (inf) is scored as a RUL of 2 t_eol: badly wrong, but finite
+    cap = 2.0 * abs(float(t_eol)) + 1.0
+    p50, p5 = np.minimum(p50, cap), np.minimum(p5, cap)
     sel = t < t_eol
     if t_p is not None:
         sel &= t >= t_p

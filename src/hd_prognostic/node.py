@@ -135,7 +135,7 @@ def load_obs_model(path: str):
         return None, f"{path}: observation model unusable ({e})"
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
     from rclpy.parameter import Parameter
@@ -146,7 +146,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
     class PrognosticNode(Node):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po)
+            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
+                             start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
             self.obs, self.obs_problem = load_obs_model(self.p["obs_model"])
             if self.obs_problem:
