@@ -40,9 +40,16 @@ from . import physics as ph
 
 
 class TwinLSTM(nn.Module):
-    """Unidirectional stacked LSTM + linear head: features [B, T, n_in] -> outputs [B, T, n_out]."""
+    """Unidirectional stacked LSTM + linear head: features [B, T, n_in] -> outputs [B, T, n_out].
 
-    def __init__(self, n_in: int, n_out: int, hidden: int, layers: int, dropout: float):
+    With ``skip`` a linear map of the current features is added to the head
+    (y = W_h h_t + W_x x_t + b): the quasi-static part of the torque (stiffness
+    times twist, N times motor torque) is linear in the features, so the LSTM
+    only has to learn the dynamic remainder (faster, better-conditioned
+    training; plain LSTM when off).
+    """
+
+    def __init__(self, n_in: int, n_out: int, hidden: int, layers: int, dropout: float, skip: bool = True):
         super().__init__()
         if layers < 1 or hidden < 1:
             raise ValueError(f"LSTM needs layers >= 1 and hidden >= 1, got {layers}, {hidden}")
@@ -52,10 +59,14 @@ class TwinLSTM(nn.Module):
         self.lstm = nn.LSTM(n_in, hidden, num_layers=layers, batch_first=True,
                             dropout=dropout if layers > 1 else 0.0, bidirectional=False)
         self.head = nn.Linear(hidden, n_out)
+        self.skip = nn.Linear(n_in, n_out, bias=False) if skip else None
 
     def forward(self, x: torch.Tensor, state: tuple[torch.Tensor, torch.Tensor] | None = None):
         z, (h, c) = self.lstm(x, state)
-        return self.head(z), (h, c)
+        y = self.head(z)
+        if self.skip is not None:
+            y = y + self.skip(x)
+        return y, (h, c)
 
 
 class StreamWrapper(nn.Module):
