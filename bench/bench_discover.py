@@ -177,6 +177,9 @@ def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -
             tc = P["T_C"] * np.exp(-P["nu_beta"] * P["n_c"] * (T - P["T_ref"]))
             slope = float(np.polyfit(T, tc, 1)[0])
             add("dT_C/dT [N*m/K]", pr["dT_C_dT"], slope, 0.25)
+        elif name == "load_dependent_friction":
+            # mesh friction mu_c |F_my| sgn(omega_m) loads the WG through F_b: on tau_m it is mu_c r_b/r_m |T_tr| sgn
+            add("c_L [-]", pr["c_L"], P["mu_c"] * P["r_b"] / P["r_m"], 0.25)
         elif name == "kinematic_error_harmonic":
             sig = next(s for s in rep["signals"] if s["signal"] == "Q_red")
             K = sig["refit_baseline_parameters"]["K"]
