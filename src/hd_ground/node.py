@@ -69,7 +69,7 @@ def analyse_archive(archive_dir: str, healthy_missions: int = 3, do_recal: bool 
     return update, report
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
@@ -79,7 +79,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
     class GroundNode(Node):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po)
+            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
+                             start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
             self.pub_update = self.create_publisher(String, ru.TOPIC_TWIN_UPDATE, ru.qos("latched"))
             self.pub_report = self.create_publisher(String, ru.TOPIC_GROUND_REPORT, ru.qos("latched"))

@@ -81,7 +81,7 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
     """Build the onboard node (rclpy Node subclass instance)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
@@ -97,7 +97,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
     class OnboardNode(Node):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po)
+            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
+                             start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
             self.cfg = OnboardConfig(**{k: self.p[k] for k in OnboardConfig.__dataclass_fields__ if k in self.p}).validate()
             self.twin_params = ph.TwinParams.from_yaml()
@@ -243,29 +244,36 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
             t_arrival = time.perf_counter()
             msgs = ru.take_all(self.sub_js, first)
             n = len(msgs)
-            stamps = np.empty(n, np.int64)
-            V = np.full((n, 6), np.nan)
-            ok = np.ones(n, bool)
-            for i, b in enumerate(msgs):
-                try:
-                    s, frame, names, pos, vel, eff = ru.decode_joint_state(b)
-                except ru.CdrError as e:
-                    ok[i] = False
-                    self.n_bad += 1
-                    if self.n_bad <= 3:
-                        self._error(f"{ru.TOPIC_JOINT_STATES}: {e}")
-                    continue
-                stamps[i] = s
-                if len(pos) >= 2:
-                    V[i, 0:2] = pos[:2]
-                if len(vel) >= 2:
-                    V[i, 2:4] = vel[:2]
-                if len(eff) >= 2:
-                    V[i, 4:6] = eff[:2]
-                if not self.hardware_id and frame:
-                    self.hardware_id = frame
-            if not ok.all():
-                stamps, V = stamps[ok], V[ok]
+            if n > int(self.p["short_path_max"]):
+                stamps, V, frame, problems = ru.decode_joint_states(msgs)
+            else:
+                stamps = np.empty(n, np.int64)
+                V = np.full((n, 6), np.nan)
+                ok = np.ones(n, bool)
+                frame, problems = "", []
+                for i, b in enumerate(msgs):
+                    try:
+                        s, fr, names, pos, vel, eff = ru.decode_joint_state(b)
+                    except ru.CdrError as e:
+                        ok[i] = False
+                        problems.append(str(e))
+                        continue
+                    stamps[i] = s
+                    if len(pos) >= 2:
+                        V[i, 0:2] = pos[:2]
+                    if len(vel) >= 2:
+                        V[i, 2:4] = vel[:2]
+                    if len(eff) >= 2:
+                        V[i, 4:6] = eff[:2]
+                    frame = frame or fr
+                if not ok.all():
+                    stamps, V = stamps[ok], V[ok]
+            for e in problems:
+                self.n_bad += 1
+                if self.n_bad <= 3:
+                    self._error(f"{ru.TOPIC_JOINT_STATES}: {e}")
+            if not self.hardware_id and frame:
+                self.hardware_id = frame
             if not self.hardware_id:
                 self.hardware_id = "unknown"
             self.n_msgs[ru.TOPIC_JOINT_STATES] += len(stamps)

@@ -98,7 +98,7 @@ def apply_update(state: dict, upd: dict, source: str = "update") -> dict:
     return new
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
     from rclpy.parameter import Parameter
@@ -109,7 +109,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None):
     class TwinNode(Node):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po)
+            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
+                             start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
             self.state = initial_state(self.p["model_dir"], self.p["params_file"])
             self.pub = self.create_publisher(String, ru.TOPIC_TWIN_STATE, ru.qos("latched"))

@@ -43,8 +43,9 @@ CONFIG_DIR = Path(__file__).resolve().parents[2] / "ros2_ws" / "config"
 # --------------------------------------------------------------------------
 # building nodes
 # --------------------------------------------------------------------------
-def make_node(name: str, context=None, overrides: dict[str, Any] | None = None):
-    """Instantiate one of the four stack nodes by name."""
+def make_node(name: str, context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+    """Instantiate one of the four stack nodes by name (``param_services=False``: no ``ros2 param`` services,
+    fewer entities for the executor to wait on; used by the in-process replay job)."""
     if name == "onboard":
         from hd_onboard.node import make_node as mk
     elif name == "twin":
@@ -55,7 +56,7 @@ def make_node(name: str, context=None, overrides: dict[str, Any] | None = None):
         from hd_ground.node import make_node as mk
     else:
         raise ValueError(f"unknown node {name!r}; one of {', '.join(NODES)}")
-    return mk(context=context, overrides=overrides)
+    return mk(context=context, overrides=overrides, param_services=param_services)
 
 
 def ros_args_for(name: str, extra: list[str] | None) -> list[str]:
@@ -122,7 +123,7 @@ class Replayer:
     provide the back-pressure.
     """
 
-    def __init__(self, node, rate: float | str = 1.0, batch: int = 200, pump=None):
+    def __init__(self, node, rate: float | str = 1.0, batch: int = 500, pump=None, tap=None):
         from rclpy.qos import QoSProfile  # noqa: F401
         from sensor_msgs.msg import JointState, Temperature
         from std_msgs.msg import String
@@ -135,6 +136,7 @@ class Replayer:
             raise ValueError(f"replay rate {rate!r} must be > 0 (or 'max')")
         self.batch = int(batch)
         self.pump = pump
+        self.tap = tap  # tap(topic, [payloads]): an in-process recorder files what is published
         self.pubs = {
             ru.TOPIC_JOINT_STATES: node.create_publisher(JointState, ru.TOPIC_JOINT_STATES, ru.qos("sensor")),
             ru.TOPIC_COMMAND: node.create_publisher(JointState, ru.TOPIC_COMMAND, ru.qos("sensor")),
@@ -144,6 +146,34 @@ class Replayer:
         self.counts = {t: 0 for t in self.pubs}
         self.n_mission = 0
         self.sample_seconds = 0.0
+
+    def _flush_tap(self, tapped) -> None:
+        if tapped:
+            for t, pays in tapped.items():
+                if pays:
+                    self.tap(t, pays)
+                    tapped[t] = []
+
+    def _publish(self, topic: str, pay: bytes) -> None:
+        """Publish; when the middleware refuses (reliable keep-all history full: the readers have not
+        taken yet), let them drain and retry, so max-rate replay throttles instead of failing."""
+        try:
+            self.pubs[topic].publish(pay)
+            return
+        except Exception as e:  # noqa: BLE001 - rclpy raises RCLError (not importable by a stable name)
+            err = e
+        for k in range(200):
+            if self.pump:
+                self.pump(force=True)
+            else:
+                self.pubs[topic].wait_for_all_acked()
+                time.sleep(0.001 * (k + 1))
+            try:
+                self.pubs[topic].publish(pay)
+                return
+            except Exception as e:  # noqa: BLE001
+                err = e
+        raise RuntimeError(f"replay: publishing on {topic} keeps failing ({err})")
 
     def play(self, path, skip_topics: Iterable[str] = (), transform=None) -> dict:
         """Replay one bag; returns per-topic counts. ``transform(topic, log_ns, payload)`` may edit or drop (None)."""
@@ -157,11 +187,17 @@ class Replayer:
         sent_meta = False
         since_pump = 0
         first_ns = last_ns = None
+        tapped = {t: [] for t in self.pubs} if self.tap is not None else None
         for topics, lt, pays in src.blocks():
             if not sent_meta:
                 meta = dict(src.meta or {})
                 meta.setdefault("bag", str(path))
-                self.pub_mission.publish(ru.json_msg(meta))
+                mmsg = ru.json_msg(meta)
+                self.pub_mission.publish(mmsg)
+                if self.tap is not None:
+                    from rclpy.serialization import serialize_message
+
+                    self.tap(ru.TOPIC_MISSION, [serialize_message(mmsg)])
                 self.n_mission += 1
                 sent_meta = True
                 if self.pump is None:  # across processes: the mission is known before its samples
@@ -187,7 +223,9 @@ class Replayer:
                             self.pump(timeout=delay)
                         else:
                             time.sleep(delay)
-                self.pubs[topic].publish(pay)
+                self._publish(topic, pay)
+                if tapped is not None:
+                    tapped[topic].append(pay)
                 counts[topic] += 1
                 self.counts[topic] += 1
                 first_ns = ln if first_ns is None else first_ns
@@ -195,11 +233,13 @@ class Replayer:
                 since_pump += 1
                 if since_pump >= self.batch:
                     since_pump = 0
+                    self._flush_tap(tapped)
                     if self.pump:
                         self.pump()
                     elif self.rate == "max":
                         for p in self.pubs.values():
                             p.wait_for_all_acked()
+        self._flush_tap(tapped)
         if not sent_meta:
             raise ValueError(f"{path}: no contract messages to replay")
         if self.pump:
@@ -241,7 +281,8 @@ class Recorder:
     LATCHED_KEEP = ("/hd/twin/state", "/hd/twin/update", "/hd/ground/report")
 
     def __init__(self, node, out: str | os.PathLike, prefixes=("/hd/", "/diagnostics"), flush_s: float = 0.5,
-                 discover_s: float = 0.25, compression: str = "zstd", split_per_mission: bool = False):
+                 discover_s: float = 0.25, compression: str = "zstd", split_per_mission: bool = False,
+                 tapped: Iterable[str] = ()):
         from hdphm import rosutil as ru
 
         self.node = node
@@ -267,7 +308,13 @@ class Recorder:
         self.w = None
         if not self.split:
             self._open(self.out)
+        self.tapped = set(tapped)  # topics filed by tap() (an in-process replayer), not subscribed
         for topic, (typ, _) in ru.STACK_TOPICS.items():
+            if topic in self.tapped:
+                self.types[topic] = typ
+                self.counts[topic] = 0
+                self.subs[topic] = None
+                continue
             self._subscribe(topic, typ)
         self.timer = node.create_timer(discover_s, self._discover)
         self.flush_timer = node.create_timer(self.flush_s, self._maybe_flush)
@@ -323,7 +370,7 @@ class Recorder:
         from hdphm import rosutil as ru
 
         sub = self.subs.get(ru.TOPIC_MISSION)
-        if sub is None:
+        if sub is None:  # not subscribed (tapped): in order by construction
             return
         msgs = []
         with sub.handle:
@@ -415,10 +462,17 @@ class Recorder:
             return
         if topic in self.LATCHED_KEEP and msgs:
             self.latched[topic] = msgs[-1]
-        for m in msgs:
-            self._file(topic, now_ns, m)
+        if self.w is None:
+            self.pending.extend((topic, now_ns, m) for m in msgs)
+        else:
+            cid = self._channel(topic)
+            self.pending.extend((cid, now_ns, m) for m in msgs)
         if len(self.pending) >= 20000:
             self.flush()
+
+    def tap(self, topic: str, payloads: list[bytes]) -> None:
+        """File messages published by a replayer in this process, as published (see :class:`Replayer`)."""
+        self._on_msgs(topic, payloads, time.time_ns())
 
     def _file(self, topic: str, now_ns: int, m: bytes) -> None:
         if self.w is None:  # split mode before the first mission: keep by topic name
@@ -475,24 +529,29 @@ class Stack:
 
     def __init__(self, domain_id: int | None = None, overrides: dict[str, dict[str, Any]] | None = None,
                  nodes: Iterable[str] = NODES, record: str | None = None, args: list[str] | None = None,
-                 split_per_mission: bool = False):
+                 split_per_mission: bool = False, tap_replay: bool = False, param_services: bool = True):
+        """``tap_replay``: the recorder files the contract topics and ``/hd/mission`` from an in-process
+        :class:`Replayer` (``Replayer(..., tap=stack.recorder.tap)``) instead of subscribing to them."""
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
         from hdphm import rosutil as ru
 
         self.ctx = ru.init_context(domain_id, args)
+        self.param_services = bool(param_services)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.nodes: dict[str, Any] = {}
         overrides = overrides or {}
         for name in nodes:
             self.add(name, overrides.get(name))
-        self.aux = Node("hdphm_stack_io", context=self.ctx)
+        self.aux = Node("hdphm_stack_io", context=self.ctx, start_parameter_services=self.param_services)
         self.ex.add_node(self.aux)
-        self.recorder = Recorder(self.aux, record, split_per_mission=split_per_mission) if record else None
+        self.recorder = (Recorder(self.aux, record, split_per_mission=split_per_mission,
+                                  tapped=(ru.TOPIC_MISSION,) + ru.CONTRACT_TOPICS if tap_replay else ())
+                         if record else None)
 
     def add(self, name: str, overrides: dict[str, Any] | None = None):
-        node = make_node(name, self.ctx, overrides)
+        node = make_node(name, self.ctx, overrides, self.param_services)
         self.nodes[name] = node
         self.ex.add_node(node)
         return node
@@ -514,7 +573,7 @@ class Stack:
         while True:
             self.ex.spin_once(timeout_sec=0.0)
             n += 1
-            if n >= (12 if force else 6) and time.monotonic() >= end:
+            if n >= (12 if force else 3) and time.monotonic() >= end:
                 break
             if time.monotonic() < end:
                 self.ex.spin_once(timeout_sec=min(0.005, max(0.0, end - time.monotonic())))
@@ -566,7 +625,8 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
         overrides.setdefault("prognostic", {})["obs_model"] = str(obs_model)
     if archive_dir:
         overrides.setdefault("ground", {})["archive_dir"] = str(archive_dir)
-    st = Stack(domain_id, overrides, record=out_mcap, split_per_mission=split_per_mission)
+    st = Stack(domain_id, overrides, record=out_mcap, split_per_mission=split_per_mission, tap_replay=True,
+               param_services=False)
     try:
         st.spin_for(settle_s)  # latched twin state reaches the onboard node
         if archive_dir:  # the ground analysis runs in a worker thread; wait for its update to be applied
@@ -577,7 +637,7 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
             if gr.error:
                 raise ValueError(f"ground analysis of {archive_dir} failed: {gr.error}")
             st.spin_for(0.3)
-        rep = Replayer(st.aux, rate, pump=st.pump)
+        rep = Replayer(st.aux, rate, pump=st.pump, tap=st.recorder.tap if st.recorder else None)
         t0 = time.perf_counter()
         it = bags
         if progress:

@@ -306,6 +306,65 @@ def decode_joint_state(buf: bytes) -> tuple[int, str, list[str], np.ndarray, np.
         raise CdrError(f"truncated JointState message ({e})") from None
 
 
+_LAYOUTS: dict[int, Any] = {}
+
+
+def decode_joint_states(msgs: list[bytes]) -> tuple[np.ndarray, np.ndarray, str, list[str]]:
+    """Decode a batch of CDR JointStates at once -> (stamps_ns (n,), V (n, 6), frame_id, problems).
+
+    ``V`` columns: position[0:2], velocity[0:2], effort[0:2] (NaN where an
+    array is shorter). Messages that share the byte layout of the first one
+    of their length (``hd_bag.cdr``: same frame, names and array lengths) are
+    decoded with one numpy step; the rest one by one with
+    :func:`decode_joint_state`. Undecodable messages are left out and named in
+    ``problems`` (stamps and rows of the others keep arrival order).
+    """
+    from hd_bag.cdr import decode_doubles, decode_stamps, match_layout, parse_jointstate_layout
+
+    n = len(msgs)
+    stamps = np.zeros(n, np.int64)
+    V = np.full((n, 6), np.nan)
+    ok = np.zeros(n, bool)
+    problems: list[str] = []
+    frame = ""
+    lens = np.fromiter((len(m) for m in msgs), np.int64, n)
+    for L in np.unique(lens).tolist():
+        idx = np.flatnonzero(lens == L)
+        lay = _LAYOUTS.get(L)
+        first = msgs[int(idx[0])]
+        if lay is None or not match_layout(np.frombuffer(first, np.uint8)[None, :], lay)[0]:
+            lay = parse_jointstate_layout(first)
+            if lay is not None:
+                _LAYOUTS[L] = lay
+        slow = idx
+        if lay is not None and len(idx) > 1:
+            rows = np.frombuffer(b"".join(msgs[i] for i in idx.tolist()), np.uint8).reshape(len(idx), L)
+            good = match_layout(rows, lay)
+            gi = idx[good]
+            stamps[gi] = decode_stamps(rows[good])
+            for c0, off, k in zip((0, 2, 4), lay.offsets, lay.counts):
+                if k >= 1:
+                    V[gi, c0:c0 + min(k, 2)] = decode_doubles(rows[good], off, min(k, 2))
+            ok[gi] = True
+            frame = frame or lay.frame_id
+            slow = idx[~good]
+        for i in slow.tolist():
+            try:
+                s_, fr, _, pos, vel, eff = decode_joint_state(msgs[i])
+            except CdrError as e:
+                problems.append(str(e))
+                continue
+            stamps[i] = s_
+            for c0, arr in ((0, pos), (2, vel), (4, eff)):
+                k = min(len(arr), 2)
+                V[i, c0:c0 + k] = arr[:k]
+            ok[i] = True
+            frame = frame or fr
+    if not ok.all():
+        stamps, V = stamps[ok], V[ok]
+    return stamps, V, frame, problems
+
+
 def decode_temperature(buf: bytes) -> tuple[int, str, float]:
     """Decode a CDR ``sensor_msgs/msg/Temperature`` -> (stamp_ns, frame_id, degC)."""
     try:
