@@ -138,7 +138,7 @@ def _fit_obs(args) -> int:
     from hd_prognostic.evaluate import load_fleet
     from hd_prognostic.hd import fit_population
 
-    fleet = load_fleet(args.fleet_dir, cache_dir=Path(args.out).parent / "cache", workers=args.workers)
+    fleet = load_fleet(args.fleet_dir, cache_dir=args.cache, workers=args.workers)
     obs = fit_population(fleet, feature=args.feature, degree=args.degree)
     obs.to_json(args.out)
     print(json.dumps({"fit_info": obs.fit_info, "degradation": obs.degradation}, indent=1))
@@ -246,6 +246,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--feature", default="HF_MTW_IF")
     p.add_argument("--degree", type=int, default=2)
     p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
+    p.add_argument("--cache", default="runs/prognostic_cache", help="per-actuator feature cache folder")
     p.set_defaults(func=_fit_obs)
     p = s.add_parser("battery", help="NASA B0005-7 exponential-fade PF, leave-one-cell-out")
     p.add_argument("--out", default="runs/prognostic_battery")

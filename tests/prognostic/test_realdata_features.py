@@ -102,3 +102,14 @@ def test_window_features_and_bad_input():
     f = block_features(m.t[sl], m.theta_m[sl] * 0 + 1.0, m.theta_f[sl], m.omega_m[sl], m.omega_f[sl], m.tau_m[sl],
                        m.Q_red[sl], 100, 0.1)
     assert np.isnan(f["ke_2x"]) and any("turns" in n for n in f["notes"])
+
+
+def test_baseline_normalisation_is_causal():
+    ob = ObservationModel(baseline="subtract", n_baseline=3)
+    assert ob.normalise([5.0, 7.0, np.nan, 9.0, 11.0]).tolist()[:2] == [0.0, 1.0]
+    y = ob.normalise([5.0, 7.0, np.nan, 9.0, 11.0])
+    assert np.isnan(y[2]) and y[3] == 2.0 and y[4] == 4.0
+    # the value at mission k does not change when later missions arrive
+    assert np.allclose(ob.normalise([5.0, 7.0])[:2], y[:2])
+    ratio = ObservationModel(baseline="ratio", n_baseline=1).normalise([2.0, 4.0])
+    assert ratio.tolist() == [1.0, 2.0]
