@@ -150,6 +150,7 @@ class ParticleFilter:
         self.x = model.check_state(particles).copy()
         self.n = len(self.x)
         self.logw = np.full(self.n, -np.log(self.n))
+        self._w_cache: tuple[np.ndarray, np.ndarray] | None = None
         self.n_steps = 0
         self.n_resample = 0
         self.last: StepInfo | None = None
@@ -157,8 +158,12 @@ class ParticleFilter:
     # ---- weights -----------------------------------------------------------
     @property
     def weights(self) -> np.ndarray:
-        w = np.exp(self.logw - self.logw.max())
-        return w / w.sum()
+        """Normalised weights (cached until the log-weights change)."""
+        lw = self.logw
+        if self._w_cache is None or self._w_cache[0] is not lw:
+            w = np.exp(lw - lw.max())
+            self._w_cache = (lw, w / w.sum())
+        return self._w_cache[1]
 
     def ess(self) -> float:
         w = self.weights

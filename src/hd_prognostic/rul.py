@@ -32,11 +32,8 @@ class RULResult:
     quantiles: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.quantiles = {
-            "p5": float(weighted_quantile(self.samples, self.weights, 0.05)[0]),
-            "p50": float(weighted_quantile(self.samples, self.weights, 0.50)[0]),
-            "p95": float(weighted_quantile(self.samples, self.weights, 0.95)[0]),
-        }
+        q = weighted_quantile(self.samples, self.weights, [0.05, 0.50, 0.95])  # one sort
+        self.quantiles = {"p5": float(q[0]), "p50": float(q[1]), "p95": float(q[2])}
         fin = np.isfinite(self.samples)
         wf = self.weights[fin]
         self.mean = float(np.sum(wf * self.samples[fin]) / wf.sum()) if wf.sum() > 0 else float("inf")
