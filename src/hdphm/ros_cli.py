@@ -119,8 +119,9 @@ class Replayer:
     ``rate``: a float (1.0 = real time, by log time) or ``"max"``.
     ``pump`` (in-process use) is called after every ``batch`` messages to let
     the subscribers in the same executor drain (lossless max-rate replay);
-    across processes the reliable keep-all QoS and ``wait_for_all_acked``
-    provide the back-pressure.
+    across processes the reliable keep-all QoS provides the back-pressure (a
+    publish the middleware refuses because a reader's history is full is
+    retried after a pause, see :meth:`_publish`).
     """
 
     def __init__(self, node, rate: float | str = 1.0, batch: int = 500, pump=None, tap=None):
@@ -165,9 +166,8 @@ class Replayer:
         for k in range(200):
             if self.pump:
                 self.pump(force=True)
-            else:
-                self.pubs[topic].wait_for_all_acked()
-                time.sleep(0.001 * (k + 1))
+            else:  # another process's reader is full: give it time to take
+                time.sleep(min(0.001 * (k + 1), 0.05))
             try:
                 self.pubs[topic].publish(pay)
                 return
@@ -190,6 +190,11 @@ class Replayer:
         tapped = {t: [] for t in self.pubs} if self.tap is not None else None
         for topics, lt, pays in src.blocks():
             if not sent_meta:
+                if self.pump is None and self.n_mission:
+                    from rclpy.duration import Duration
+
+                    for p in self.pubs.values():  # the previous mission's samples reached every reader
+                        p.wait_for_all_acked(Duration(seconds=2.0))
                 meta = dict(src.meta or {})
                 meta.setdefault("bag", str(path))
                 mmsg = ru.json_msg(meta)
@@ -236,9 +241,6 @@ class Replayer:
                     self._flush_tap(tapped)
                     if self.pump:
                         self.pump()
-                    elif self.rate == "max":
-                        for p in self.pubs.values():
-                            p.wait_for_all_acked()
         self._flush_tap(tapped)
         if not sent_meta:
             raise ValueError(f"{path}: no contract messages to replay")
@@ -252,6 +254,14 @@ class Replayer:
 # --------------------------------------------------------------------------
 # recorder
 # --------------------------------------------------------------------------
+def _src_ts(info) -> int:
+    """Publisher source timestamp [ns] from an rclpy MessageInfo (dict in Jazzy)."""
+    try:
+        return int(info["source_timestamp"])
+    except (TypeError, KeyError):
+        return int(getattr(info, "source_timestamp", 0))
+
+
 class Recorder:
     """Records topics to MCAP from an rclpy node (raw CDR, no decode).
 
@@ -356,31 +366,77 @@ class Recorder:
         sub_holder = {}
         contract = topic in ru.CONTRACT_TOPICS
 
-        def cb(first, topic=topic):
-            if contract and self.split:
+        if topic == ru.TOPIC_MISSION and self.split:
+            def cb(first, info):  # noqa: ANN001
+                self._mission_msg(first, _src_ts(info))
                 self._poll_mission()
-            msgs = ru.take_all(sub_holder["s"], first)
-            self._on_msgs(topic, msgs, time.time_ns())
+        elif contract and self.split:
+            def cb(first, info):  # noqa: ANN001 - (message, MessageInfo): routed by source timestamp
+                self._on_contract(topic, sub_holder["s"], first, _src_ts(info))
+        else:
+            def cb(first, topic=topic):
+                msgs = ru.take_all(sub_holder["s"], first)
+                self._on_msgs(topic, msgs, time.time_ns())
 
         sub_holder["s"] = self.node.create_subscription(cls, topic, cb, q, raw=True)
         self.subs[topic] = sub_holder["s"]
 
-    def _poll_mission(self) -> None:
-        """File any /hd/mission message already delivered (before the samples that follow it)."""
-        from hdphm import rosutil as ru
-
-        sub = self.subs.get(ru.TOPIC_MISSION)
-        if sub is None:  # not subscribed (tapped): in order by construction
-            return
-        msgs = []
+    @staticmethod
+    def _take_with_src(sub) -> list[tuple[bytes, int]]:
+        out = []
         with sub.handle:
             while True:
                 r = sub.handle.take_message(sub.msg_type, sub.raw)
                 if r is None:
                     break
-                msgs.append(r[0])
-        if msgs:
-            self._on_msgs(ru.TOPIC_MISSION, msgs, time.time_ns())
+                out.append((r[0], _src_ts(r[1])))
+        return out
+
+    def _on_contract(self, topic: str, sub, first: bytes, first_src: int) -> None:
+        """Split mode: file contract messages by the publisher's source timestamp against the
+        ``/hd/mission`` boundaries, so a sample published before a mission message goes to the
+        previous file even when the readers deliver the two topics in another order."""
+        from hdphm import rosutil as ru
+
+        held = [(first, first_src)]
+        msub = self.subs.get(ru.TOPIC_MISSION)
+        if msub is not None:
+            for mmsg, msrc in self._take_with_src(msub):
+                self._file_src(topic, [h for h in held if h[1] < msrc])
+                held = [h for h in held if h[1] >= msrc]
+                self._mission_msg(mmsg, msrc)
+        self._file_src(topic, held + self._take_with_src(sub))
+
+    def _file_src(self, topic: str, items: list[tuple[bytes, int]]) -> None:
+        if items:
+            self._on_msgs(topic, [m for m, _ in items], time.time_ns())
+
+    def _mission_msg(self, mmsg: bytes, msrc: int) -> None:
+        """A mission boundary: contract messages already queued and published before it go to the
+        current file, then the new file starts; later ones are filed there."""
+        from hdphm import rosutil as ru
+
+        later: dict[str, list[tuple[bytes, int]]] = {}
+        for t in ru.CONTRACT_TOPICS:
+            sub = self.subs.get(t)
+            if sub is None:
+                continue
+            items = self._take_with_src(sub)
+            self._file_src(t, [x for x in items if x[1] < msrc])
+            later[t] = [x for x in items if x[1] >= msrc]
+        self._on_msgs(ru.TOPIC_MISSION, [mmsg], time.time_ns())
+        for t, items in later.items():
+            self._file_src(t, items)
+
+    def _poll_mission(self) -> None:
+        """Split mode (mission topic subscribed): handle every delivered ``/hd/mission`` message."""
+        from hdphm import rosutil as ru
+
+        sub = self.subs.get(ru.TOPIC_MISSION)
+        if sub is None:  # not subscribed (tapped): in order by construction
+            return
+        for mmsg, msrc in self._take_with_src(sub):
+            self._mission_msg(mmsg, msrc)
 
     def _discover(self) -> None:
         for topic, types in self.node.get_topic_names_and_types():

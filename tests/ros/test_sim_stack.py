@@ -138,3 +138,50 @@ def test_ground_node_recalibrates_and_pushes_thresholds(fleet, tmp_path, domain_
         assert onb.core.calibrated and not onb.errors
     finally:
         st.close()
+
+
+def test_record_split_per_mission_across_processes(tmp_path, domain_id):
+    """`hdphm record --split-per-mission` in its own process, two missions replayed from this one at max
+    rate (same stamps in both bags): each file holds exactly its mission and validates; SIGTERM ends it."""
+    import signal
+    import subprocess
+
+    from rclpy.node import Node
+
+    from hdphm.ros_cli import Replayer
+
+    bags = []
+    for k in range(2):
+        m = sim_mission(0, k, duration=3.0, mission_index=k)
+        bags.append(str(tmp_path / f"b{k}.mcap"))
+        write_mission(bags[-1], m)
+    out = tmp_path / "rec"
+    proc = subprocess.Popen([sys.executable, "-m", "hdphm.cli", "record", "--split-per-mission", "--out", str(out),
+                             "--domain-id", str(domain_id)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    ctx = ru.init_context(domain_id)
+    node = Node("test_replay", context=ctx)
+    try:
+        rep = Replayer(node, "max")
+        end = time.monotonic() + 30
+        while time.monotonic() < end and rep.pubs[ru.TOPIC_JOINT_STATES].get_subscription_count() == 0:
+            time.sleep(0.05)
+        for b in bags:
+            rep.play(b)
+        for p in rep.pubs.values():
+            p.wait_for_all_acked()
+        time.sleep(1.0)
+    finally:
+        node.destroy_node()
+        import rclpy
+
+        rclpy.try_shutdown(context=ctx)
+        proc.send_signal(signal.SIGTERM)
+        log = proc.communicate(timeout=30)[0]
+    assert proc.returncode == 0, log
+    files = sorted(out.glob("*.mcap"))
+    assert [f.name for f in files] == ["EMA-0000_m0000.mcap", "EMA-0000_m0001.mcap"], log
+    for f, b in zip(files, bags):
+        assert not [v for v in validate_bag(str(f)) if v.severity in ("error", "warning")], f
+        a, src = read_mission(str(f)), read_mission(b)
+        assert a.n == src.n and len(a.t_cmd) == len(src.t_cmd)
+        np.testing.assert_array_equal(a.tau_m, src.tau_m)
