@@ -34,6 +34,7 @@ from . import data as D
 from . import physics as ph
 
 MODEL_FORMAT = "hd_twin/1"
+_CR = "\r" if sys.stderr.isatty() else ""  # overwrite progress lines on a terminal only
 
 PRESETS: dict[str, dict[str, Any]] = {
     # The paper's Table 1 (GPU-sized).
@@ -115,7 +116,7 @@ def load_missions(paths: Sequence[str | Path], progress: bool = True) -> list:
     out = []
     for i, b in enumerate(bags):
         if progress:
-            print(f"\rreading bags {i + 1}/{len(bags)}: {b.name}   ", end="", file=sys.stderr, flush=True)
+            print(f"{_CR}reading bags {i + 1}/{len(bags)}: {b.name}   ", end="" if _CR else "\n", file=sys.stderr, flush=True)
         m = read_mission(b)
         if not m.report.path:
             m.report.path = str(b)
@@ -332,10 +333,12 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     segs_by_m = {}
     for k, i in enumerate(list(tr_idx) + list(va_idx)):
         if progress:
-            print(f"\rpre-processing {k + 1}/{len(tr_idx) + len(va_idx)}", end="", file=sys.stderr, flush=True)
+            print(f"{_CR}pre-processing {k + 1}/{len(tr_idx) + len(va_idx)}", end="" if _CR else "\n", file=sys.stderr, flush=True)
         segs_by_m[i] = D.preprocess(missions[i], fs_model, T_ref=params.T_ref)
     if progress:
         print(file=sys.stderr)
+    t_pre = time.perf_counter() - t0
+    t0 = time.perf_counter()
     tr_segs = [s for i in tr_idx for s in segs_by_m[i]]
     va_segs = [s for i in va_idx for s in segs_by_m[i]]
     if not tr_segs or not va_segs:
@@ -404,6 +407,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         "validation": evaluate(pinn, va_segs, norm),
         "training": evaluate(pinn, tr_segs, norm, residuals=False),
         "train_time_s": train_time,
+        "preprocess_time_s": t_pre,
         "n_train_missions": len(tr_idx),
         "n_val_missions": len(va_idx),
         "n_train_samples": int(sum(s.n for s in tr_segs)),
