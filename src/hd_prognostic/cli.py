@@ -109,7 +109,8 @@ def _eval(args) -> int:
     out = Path(args.out)
     fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache", workers=args.workers)
     s = fleet_eval(fleet, out, folds=args.folds, n_particles=args.particles, seed=args.seed, feature=args.feature,
-                   degree=args.degree, likelihood=args.likelihood, with_ukf=not args.no_ukf)
+                   degree=args.degree, likelihood=args.likelihood, with_ukf=not args.no_ukf,
+                   fuse=args.fuse.split(",") if args.fuse else None)
     ag = s["aggregate"]
     print("PF aggregate:", json.dumps(ag, indent=1, default=float))
     if s["ukf_aggregate"]:
@@ -139,7 +140,8 @@ def _fit_obs(args) -> int:
     from hd_prognostic.hd import fit_population
 
     fleet = load_fleet(args.fleet_dir, cache_dir=args.cache, workers=args.workers)
-    obs = fit_population(fleet, feature=args.feature, degree=args.degree)
+    obs = fit_population(fleet, feature=args.feature, degree=args.degree,
+                         fuse=args.fuse.split(",") if args.fuse else None)
     obs.to_json(args.out)
     print(json.dumps({"fit_info": obs.fit_info, "degradation": obs.degradation}, indent=1))
     print(f"wrote {args.out}")
@@ -233,6 +235,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--degree", type=int, default=2)
     p.add_argument("--likelihood", choices=("gaussian", "student_t"), default="student_t")
     p.add_argument("--no-ukf", action="store_true", help="skip the UKF baseline")
+    p.add_argument("--fuse", default=None, metavar="F1,F2,...",
+                   help="fuse these features into one health index (wear regression on the training actuators)")
     p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
     p.set_defaults(func=_eval)
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
@@ -247,6 +251,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--degree", type=int, default=2)
     p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
     p.add_argument("--cache", default="runs/prognostic_cache", help="per-actuator feature cache folder")
+    p.add_argument("--fuse", default=None, metavar="F1,F2,...",
+                   help="fuse these features into one health index (wear regression on the training actuators)")
     p.set_defaults(func=_fit_obs)
     p = s.add_parser("battery", help="NASA B0005-7 exponential-fade PF, leave-one-cell-out")
     p.add_argument("--out", default="runs/prognostic_battery")

@@ -224,7 +224,8 @@ def ukf_history(a: ActuatorData, obs: ObservationModel, n_samples: int = 2000, s
 
 def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particles: int = 2000, seed: int = 0,
                feature: str = "HF_MTW_IF", degree: int = 2, baseline: str = "subtract",
-               likelihood: str = "student_t", with_ukf: bool = True, alpha: float = 0.2, progress: bool = True) -> dict:
+               likelihood: str = "student_t", with_ukf: bool = True, alpha: float = 0.2, progress: bool = True,
+               fuse: list[str] | None = None) -> dict:
     """k-fold held-out evaluation over actuators; writes per-actuator and aggregate metrics, figures."""
     from hd_prognostic.plots import save_alpha_lambda_grid, save_snapshot, save_state_history
 
@@ -239,7 +240,7 @@ def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particle
         test = [a for a in fleet if fold_of[a.actuator_id] == fi]
         if not test:
             continue
-        obs = fit_population(train, feature=feature, degree=degree, baseline=baseline)
+        obs = fit_population(train, feature=feature, degree=degree, baseline=baseline, fuse=fuse)
         obs.to_json(out / f"obs_model_fold{fi}.json")
         for a in test:
             eol = a.eol_mission()
@@ -295,7 +296,8 @@ def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particle
     summary = {"per_actuator": per, "aggregate": M.aggregate(per), "censored": censored,
                "ukf_per_actuator": per_ukf, "ukf_aggregate": M.aggregate(per_ukf) if per_ukf else {},
                "settings": {"folds": folds, "n_particles": n_particles, "seed": seed, "feature": feature,
-                            "degree": degree, "baseline": baseline, "likelihood": likelihood, "alpha": alpha}}
+                            "degree": degree, "baseline": baseline, "likelihood": likelihood, "alpha": alpha,
+                            "fuse": fuse}}
     (out / "eval_summary.json").write_text(json.dumps(summary, indent=2, default=float))
     if rows:
         keys = list(rows[0].keys())

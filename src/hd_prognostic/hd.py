@@ -163,8 +163,14 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
     return a
 
 
+def _feature_dict(a: ActuatorData) -> dict[str, np.ndarray]:
+    names = set().union(*(f.keys() for f in a.features)) if a.features else set()
+    return {k: a.feature(k) for k in names if k not in ("notes", "path", "actuator_id", "torque_source")}
+
+
 def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree: int = 2,
-                   baseline: str = "subtract", n_baseline: int = 3) -> ObservationModel:
+                   baseline: str = "subtract", n_baseline: int = 3,
+                   fuse: list[str] | None = None) -> ObservationModel:
     """Observation model and Archard prior from training actuators (which carry wear truth).
 
     * obs: pooled (h_true, normalised feature) pairs, heteroscedastic fit.
@@ -174,11 +180,19 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
       first-mission wear; h_fail the population median.
     """
     hs, ys, lk, lres, h0, hf, Ws = [], [], [], [], [], [], []
+    tmp = ObservationModel(feature=feature, baseline=baseline, n_baseline=n_baseline)
+    if fuse:
+        for a in train:
+            if a.h_true is None:
+                raise ValueError(f"{a.actuator_id}: training actuators need wear truth (include_truth=True)")
+        X = np.vstack([np.column_stack([tmp.normalise(a.feature(f)) for f in fuse]) for a in train])
+        coef = ObservationModel.fit_fusion(np.concatenate([a.h_true for a in train]), X)
+        tmp.fusion_features, tmp.fusion_coef = list(fuse), [float(c) for c in coef]
+        feature = "HI_fused"
     for a in train:
         if a.h_true is None:
             raise ValueError(f"{a.actuator_id}: training actuators need wear truth (include_truth=True)")
-        tmp = ObservationModel(feature=feature, baseline=baseline, n_baseline=n_baseline)
-        y = tmp.normalise(a.feature(feature))
+        y = tmp.series(_feature_dict(a))
         hs.append(a.h_true)
         ys.append(y)
         W = a.feature("W_load")
@@ -194,6 +208,7 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
         hf.append(a.h_fail)
     obs = ObservationModel.fit(np.concatenate(hs), np.concatenate(ys), feature=feature, degree=degree,
                                baseline=baseline, n_baseline=n_baseline, h_fail=float(np.nanmedian(hf)))
+    obs.fusion_features, obs.fusion_coef = tmp.fusion_features, tmp.fusion_coef
     if not lk:
         raise ValueError("fit_population: no training actuator has enough wear increments for the Archard prior")
     lres = np.concatenate(lres)
@@ -234,7 +249,7 @@ def mission_sequence(a: ActuatorData, obs: ObservationModel) -> tuple[np.ndarray
     y = np.full(len(full), np.nan)
     W = np.full(len(full), np.nan)
     pos = mi - mi[0]
-    y[pos] = obs.normalise(a.feature(obs.feature))
+    y[pos] = obs.series(_feature_dict(a))
     W[pos] = a.feature("W_load")
     w_pop = float(obs.degradation.get("W_median", np.nan))
     for k in range(len(W)):  # causal fill (over missions, not samples)

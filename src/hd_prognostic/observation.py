@@ -42,6 +42,11 @@ class ObservationModel:
     #: (ArchardWear keyword arguments: log_kappa_mean/std, h0_mean/std, sigma_proc, h_fail) and
     #: ``W_median`` [J], the population's median load-sliding integral per mission.
     degradation: dict = field(default_factory=dict)
+    #: optional feature fusion: the observed health index is
+    #: ``sum_j fusion_coef[j] * normalise(f_j) + fusion_coef[-1]`` over ``fusion_features``
+    #: (a least-squares wear regression fitted on the training population, in m of wear).
+    fusion_features: list[str] = field(default_factory=list)
+    fusion_coef: list[float] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if self.baseline not in BASELINES:
@@ -85,6 +90,34 @@ class ObservationModel:
             return y
         b = self.baselines(y)
         return y - b if self.baseline == "subtract" else y / b
+
+    def series(self, features: dict[str, np.ndarray]) -> np.ndarray:
+        """The observed health index per mission from per-mission feature series (name -> array).
+
+        Without fusion: the normalised ``self.feature``. With fusion: the
+        fitted linear combination of the normalised ``fusion_features``
+        (NaN where any of them is NaN: that mission is predict-only).
+        """
+        if not self.fusion_features:
+            if self.feature not in features:
+                raise KeyError(f"feature {self.feature!r} missing; have {sorted(features)}")
+            return self.normalise(features[self.feature])
+        missing = [f for f in self.fusion_features if f not in features]
+        if missing:
+            raise KeyError(f"fusion features {missing} missing; have {sorted(features)}")
+        cols = [self.normalise(features[f]) for f in self.fusion_features]
+        X = np.column_stack(cols + [np.ones(len(cols[0]))])
+        return X @ np.asarray(self.fusion_coef, float)
+
+    @staticmethod
+    def fit_fusion(h: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """Least-squares coefficients (last = intercept) of wear ``h`` on normalised features ``X``."""
+        A = np.column_stack([X, np.ones(len(X))])
+        ok = np.all(np.isfinite(A), axis=1) & np.isfinite(h)
+        if ok.sum() < A.shape[1] + 2:
+            raise ValueError(f"fit_fusion: only {ok.sum()} complete rows for {A.shape[1]} coefficients")
+        c, *_ = np.linalg.lstsq(A[ok], h[ok], rcond=None)
+        return c
 
     # ---- fitting --------------------------------------------------------------
     @classmethod
