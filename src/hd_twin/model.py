@@ -29,6 +29,7 @@ Loss (paper eq. 1-4)::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -201,11 +202,23 @@ def physics_residuals_torch(pred_SI: dict, batch: dict, params: ph.TwinParams, e
 
 
 class PINN(nn.Module):
-    """Network + output scaling + physics loss state (lambda_c, residual scaler)."""
+    """Network + output scaling + physics loss state (lambda_c, residual scaler, parameter calibration).
+
+    ``calibrate`` names physical parameters the PINN identifies jointly with
+    the network (the inverse problem): each gets a learnable log-multiplier
+    ``c_i`` (p_i = p_i0 exp(c_i)), regularised towards the prior value by
+    ``calib_reg * sum c_i^2``; they enter only the physics term.
+    """
 
     def __init__(self, net: TwinLSTM, params: ph.TwinParams, effects, q_mean: float, q_std: float,
-                 loss_cfg: LossConfig, extra_terms=()):
+                 loss_cfg: LossConfig, extra_terms=(), calibrate=(), calib_reg: float = 1e-2):
         super().__init__()
+        bad = [n for n in calibrate if n not in ph._BOUNDS or n in ("N", "k_t", "T_ref")]
+        if bad:
+            raise ValueError(f"cannot calibrate {bad}; choose among {sorted(set(ph._BOUNDS) - {'N', 'k_t', 'T_ref'})}")
+        self.calib_names = list(calibrate)
+        self.calib_reg = float(calib_reg)
+        self.calib = nn.Parameter(torch.zeros(len(self.calib_names)))
         self.net, self.params, self.effects = net, params, list(effects)
         self.extra_terms = list(extra_terms)
         self.q_mean, self.q_std = float(q_mean), float(q_std)
@@ -215,6 +228,21 @@ class PINN(nn.Module):
         self.cfg = loss_cfg
         self.lam = LambdaC(loss_cfg.lambda_init, loss_cfg.lambda_mode)
         self.scaler = ResidualScaler(ph.residual_scales(params, q_std), loss_cfg.adaptive_scaling, loss_cfg.scale_momentum)
+
+    def physics_params(self) -> ph.TwinParams:
+        """Parameters for the physics term (calibrated ones as differentiable tensors)."""
+        if not self.calib_names:
+            return self.params
+        kw = {n: getattr(self.params, n) * torch.exp(self.calib[i]) for i, n in enumerate(self.calib_names)}
+        return dataclasses.replace(self.params, **kw)
+
+    def calibrated_params(self) -> ph.TwinParams:
+        """The identified parameters as plain floats (validated)."""
+        if not self.calib_names:
+            return self.params
+        c = self.calib.detach().cpu().numpy()
+        kw = {n: float(getattr(self.params, n) * np.exp(c[i])) for i, n in enumerate(self.calib_names)}
+        return dataclasses.replace(self.params, **kw).validate("calibrated twin parameters")
 
     def output_scales(self) -> dict:
         """SI = mean + scale * network output, per output channel."""
@@ -235,7 +263,7 @@ class PINN(nn.Module):
         res = {"L_d": L_d, "pred": pred}
         use_phys = physics and (self.lam.mode != "fixed" or self.lam.init > 0)
         if physics:
-            r = physics_residuals_torch(pred, batch, self.params, self.effects, self.extra_terms)
+            r = physics_residuals_torch(pred, batch, self.physics_params(), self.effects, self.extra_terms)
             m = mask[:, 1:-1]
             nm = m.sum().clamp_min(1)
             R = torch.stack(r)  # [4, B, T-2]
@@ -251,6 +279,8 @@ class PINN(nn.Module):
         res["lambda_c"] = float(self.lam.value().detach())
         if use_phys:
             res["L_tot"] = L_d + ramp * self.lam.term(res["L_c"])
+            if self.calib_names:
+                res["L_tot"] = res["L_tot"] + self.calib_reg * (self.calib**2).sum()
             res["L_tot_report"] = (L_d + res["lambda_c"] * res["L_c_ref"]).detach()
         else:
             res["L_tot"] = L_d

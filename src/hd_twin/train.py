@@ -36,14 +36,20 @@ from . import physics as ph
 MODEL_FORMAT = "hd_twin/1"
 _CR = "\r" if sys.stderr.isatty() else ""  # overwrite progress lines on a terminal only
 
+#: Physical parameters the PINN identifies by default (those the data constrain: the
+#: series stiffness, input friction, inertias and flank friction); the rest stay at the prior.
+CALIBRATE_DEFAULT = ("k_m", "k_FS", "k_b", "T_C", "b_visc", "J_WG", "J_CS", "mu_c")
+
 PRESETS: dict[str, dict[str, Any]] = {
     # The paper's Table 1 (GPU-sized).
     "paper": dict(layers=3, hidden=512, dropout=0.41873, lr=4.51e-3, lambda_init=8e-2,
-                  epochs=60, seq_len=256, stride=128, batch=32, fs_target=None, ramp_epochs=10),
+                  epochs=60, seq_len=256, stride=128, batch=32, fs_target=None, ramp_epochs=10,
+                  calibrate=list(CALIBRATE_DEFAULT)),
     # CPU/CI-sized: trains in minutes on 2 cores.
     # Short windows and small batches: many optimiser steps per epoch (what an LSTM needs on CPU).
     "small": dict(layers=2, hidden=64, dropout=0.0, lr=5e-3, lambda_init=8e-2,
-                  epochs=15, seq_len=128, stride=128, batch=16, fs_target=250.0, ramp_epochs=3),
+                  epochs=15, seq_len=128, stride=128, batch=16, fs_target=250.0, ramp_epochs=3,
+                  calibrate=list(CALIBRATE_DEFAULT)),
     # For unit tests only.
     "tiny": dict(layers=1, hidden=8, dropout=0.0, lr=1e-2, lambda_init=8e-2,
                  epochs=2, seq_len=48, stride=24, batch=8, fs_target=None, ramp_epochs=1),
@@ -71,6 +77,8 @@ class TrainConfig:
     washout: int = 16
     grad_clip: float = 1.0
     skip: bool = True  # linear feature-to-output path beside the LSTM
+    calibrate: list[str] = field(default_factory=list)  # physical parameters identified jointly (log-multipliers)
+    calib_reg: float = 1e-2  # weight of the prior on the log-multipliers
     weight_decay: float = 0.0
     val_frac: float = 0.25
     seed: int = 0
@@ -251,7 +259,7 @@ def residual_rms(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, params: ph
             pred = pinn.to_SI(out)
             from .model import physics_residuals_torch
 
-            p = params or pinn.params
+            p = params or pinn.calibrated_params()
             if abs(p.N - s.N) > 1e-9:
                 p = p.with_meta(s.N, s.k_t)
             r = physics_residuals_torch(pred, tb, p, pinn.effects, pinn.extra_terms)
@@ -350,13 +358,14 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     net = TwinLSTM(len(D.FEATURES), len(D.OUTPUTS), cfg.hidden, cfg.layers, cfg.dropout, cfg.skip)
     lcfg = LossConfig(lambda_mode=cfg.lambda_mode, lambda_init=cfg.lambda_init, adaptive_scaling=cfg.adaptive_scaling,
                       ramp_epochs=cfg.ramp_epochs, washout=cfg.washout)
-    pinn = PINN(net, params, cfg.declared_effects, norm.q_mean, norm.q_std, lcfg, cfg.extra_terms)
+    pinn = PINN(net, params, cfg.declared_effects, norm.q_mean, norm.q_std, lcfg, cfg.extra_terms,
+                cfg.calibrate, cfg.calib_reg)
     physics_on = not (cfg.lambda_mode == "fixed" and cfg.lambda_init == 0)
     dev = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
                        ("cpu" if cfg.device == "auto" else cfg.device))
     pinn.to(dev)
     opt = torch.optim.Adam([{"params": net.parameters(), "weight_decay": cfg.weight_decay},
-                            {"params": list(pinn.lam.parameters()), "weight_decay": 0.0}], lr=cfg.lr)
+                            {"params": list(pinn.lam.parameters()) + [pinn.calib], "weight_decay": 0.0}], lr=cfg.lr)
     n_tr = len(Wtr["x"])
     steps_per_epoch = max(1, math.ceil(n_tr / cfg.batch))
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.lr, total_steps=cfg.epochs * steps_per_epoch,
@@ -428,6 +437,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         "declared_effects": list(cfg.declared_effects),
         "extra_terms": list(cfg.extra_terms),
         "params": params.to_dict(),
+        "calibrated_params": pinn.calibrated_params().to_dict() if cfg.calibrate else None,
         "preprocessing": {"fs_model": fs_model, "antialias": "causal Butterworth order 4, 0.8 x new Nyquist (when decimating)",
                           "differentiation": "per segment: zero-phase Butterworth(2) at 0.25 fs + 2nd-order central differences",
                           "temperature_frame": "gearbox (motor_winding fallback)"},
@@ -493,8 +503,15 @@ def load_pinn(model_dir: str | Path):
     net = TwinLSTM(len(cfgd["features"]), len(cfgd["outputs"]), a["hidden"], a["layers"], a["dropout"], a.get("skip", False))
     lcfg = LossConfig(lambda_mode=t["lambda_mode"], lambda_init=t["lambda_init"], adaptive_scaling=t["adaptive_scaling"],
                       ramp_epochs=t["ramp_epochs"], washout=t["washout"])
-    pinn = PINN(net, params, cfgd["declared_effects"], norm.q_mean, norm.q_std, lcfg, cfgd.get("extra_terms", []))
-    pinn.load_state_dict(torch.load(model_dir / "model.pt", weights_only=True))
+    pinn = PINN(net, params, cfgd["declared_effects"], norm.q_mean, norm.q_std, lcfg, cfgd.get("extra_terms", []),
+                t.get("calibrate", []), t.get("calib_reg", 1e-2))
+    try:
+        sd = torch.load(model_dir / "model.pt", weights_only=True)
+    except FileNotFoundError:
+        raise ValueError(f"{model_dir}: model.pt missing") from None
+    missing, unexpected = pinn.load_state_dict(sd, strict=False)
+    if unexpected or set(missing) - {"calib"}:  # models written before calibration existed lack "calib"
+        raise ValueError(f"{model_dir}/model.pt does not match config.json (missing {missing}, unexpected {unexpected})")
     pinn.eval()
     return pinn, norm, cfgd
 
