@@ -170,7 +170,14 @@ def block_features(
         out["W_load"] = float(np.mean(p[pv]) * out["duration"])
 
     # transmission error with the nominal elastic twist removed
-    te = theta_f - theta_m / N - cfg.stiffness.twist(Q)
+    raw_te = theta_f - theta_m / N
+    rt = raw_te[np.isfinite(raw_te)]
+    if len(rt) > 20 and np.std(rt) < 1e-10:
+        # theta_m was derived from theta_f (e.g. an import without an input encoder): no transmission error
+        notes.append("theta_f - theta_m/N is identically constant: theta_m looks derived from theta_f; "
+                     "kinematic-error features are not observable in this bag")
+        raw_te = np.full(n, np.nan)
+    te = raw_te - cfg.stiffness.twist(Q)
     dQ = _seg_gradient(Q, t, seg)
     qmax = np.nanmax(np.abs(Q)) if np.isfinite(Q).any() else 0.0
     sgnQ = np.where(np.abs(Q) > cfg.q_deadband_frac * qmax, np.sign(Q), 0.0)

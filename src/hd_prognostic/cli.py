@@ -66,7 +66,7 @@ def _prognose(args) -> int:
     print(f"{a.actuator_id}: {n} missions, last RUL P5/P50/P95 = {last[0]:.0f}/{last[1]:.0f}/{last[2]:.0f} missions; "
           f"wrote {out}/rul_history.json, .csv and plots")
     if a.errors:
-        print(f"skipped {len(a.errors)} unusable bags (listed in rul_history.json meta)", file=sys.stderr)
+        print(f"{len(a.errors)} notes about the bags (skipped or reordered; in rul_history.json meta)", file=sys.stderr)
     return 0
 
 
@@ -205,6 +205,18 @@ def _virkler(args) -> int:
     return 0
 
 
+def _guard(fn):
+    """Bad input (missing folder, unusable bags, bad JSON) -> one clear error line and exit status 2."""
+    def run(args):
+        try:
+            return fn(args)
+        except (FileNotFoundError, ValueError, KeyError) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+    run.__name__ = fn.__name__
+    return run
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("prognose", help="particle-filter RUL history of one actuator's bags")
     p.add_argument("bag_dir", help="folder with one actuator's mission bags (*.mcap)")
@@ -214,14 +226,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--likelihood", choices=("gaussian", "student_t"), default="student_t")
     p.add_argument("--no-plots", action="store_true", help="write the history only")
-    p.set_defaults(func=_prognose)
+    p.set_defaults(func=_guard(_prognose))
 
     p = sub.add_parser("metrics", help="score a RUL history against the true end of life")
     p.add_argument("rul_history", help="rul_history.json from 'hdphm prognose'")
     p.add_argument("--truth", required=True, help="true EOL (same time unit) or the simulated actuator's bag folder")
     p.add_argument("--alpha", type=float, default=0.2)
     p.add_argument("--out", default=None, help="output folder (default: next to the history)")
-    p.set_defaults(func=_metrics)
+    p.set_defaults(func=_guard(_metrics))
 
     pg = sub.add_parser("prognostic", help="prognostic evaluations: eval, features, fit-obs, battery, virkler")
     s = pg.add_subparsers(dest="prognostic_cmd", metavar="SUBCOMMAND")
@@ -238,12 +250,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fuse", default=None, metavar="F1,F2,...",
                    help="fuse these features into one health index (wear regression on the training actuators)")
     p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
-    p.set_defaults(func=_eval)
+    p.set_defaults(func=_guard(_eval))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")
     p.add_argument("--out", default="runs/prognostic_features")
     p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
-    p.set_defaults(func=_features)
+    p.set_defaults(func=_guard(_features))
     p = s.add_parser("fit-obs", help="fit the observation model + Archard prior on a training fleet")
     p.add_argument("fleet_dir")
     p.add_argument("--out", required=True, help="JSON to write")
@@ -253,17 +265,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cache", default="runs/prognostic_cache", help="per-actuator feature cache folder")
     p.add_argument("--fuse", default=None, metavar="F1,F2,...",
                    help="fuse these features into one health index (wear regression on the training actuators)")
-    p.set_defaults(func=_fit_obs)
+    p.set_defaults(func=_guard(_fit_obs))
     p = s.add_parser("battery", help="NASA B0005-7 exponential-fade PF, leave-one-cell-out")
     p.add_argument("--out", default="runs/prognostic_battery")
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--t-start", type=float, default=20.0, help="first prediction cycle")
-    p.set_defaults(func=_battery)
+    p.set_defaults(func=_guard(_battery))
     p = s.add_parser("virkler", help="Virkler crack growth, Paris-law PF, 2-fold over specimens")
     p.add_argument("--out", default="runs/prognostic_virkler")
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--max-specimens", type=int, default=None, help="held-out specimens per fold (default: all)")
-    p.set_defaults(func=_virkler)
+    p.set_defaults(func=_guard(_virkler))
     pg.set_defaults(func=lambda a: (pg.print_help(), 2)[1])

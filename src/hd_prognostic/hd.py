@@ -147,11 +147,20 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
             print(f"  {bag_dir}: {i + 1}/{len(bags)} bags", flush=True)
     if not rows:
         raise ValueError(f"{bag_dir}: no usable bag ({'; '.join(errors[:3])})")
-    o = np.argsort([r["mission_index"] for r in rows], kind="stable")
+    o = np.lexsort(([r["path"] for r in rows], [r["operating_hours"] for r in rows],
+                    [r["mission_index"] for r in rows]))
     rows = [rows[i] for i in o]
     mi = np.array([r["mission_index"] for r in rows], int)
     if np.any(np.diff(mi) == 0):
-        raise ValueError(f"{bag_dir}: duplicate mission_index {mi[np.flatnonzero(np.diff(mi) == 0)[0]]}")
+        # bags from other tools may repeat mission_index: keep (index, hours, file) order, renumber, say so
+        dup = [rows[i + 1]["path"] for i in np.flatnonzero(np.diff(mi) == 0)]
+        msg = (f"{bag_dir}: duplicate mission_index in {len(dup)} bags (e.g. {dup[0]}); ordered by "
+               f"(mission_index, operating_hours, file name) and renumbered 0..{len(rows) - 1}")
+        print(f"warning: {msg}", file=sys.stderr)
+        errors.append(msg)
+        mi = np.arange(len(rows))
+        for r, k in zip(rows, mi):
+            r["mission_index"] = int(k)
     a = ActuatorData(aid, [r["path"] for r in rows], mi, np.array([r["operating_hours"] for r in rows]), rows, errors)
     if include_truth:
         a.h_true = np.asarray(truth)[o]

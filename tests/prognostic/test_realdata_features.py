@@ -113,3 +113,10 @@ def test_baseline_normalisation_is_causal():
     assert np.allclose(ob.normalise([5.0, 7.0])[:2], y[:2])
     ratio = ObservationModel(baseline="ratio", n_baseline=1).normalise([2.0, 4.0])
     assert ratio.tolist() == [1.0, 2.0]
+
+
+def test_derived_motor_angle_makes_ke_features_unobservable():
+    m = _mission(2e-5, 1e-4)
+    f = block_features(m.t, m.theta_m, m.theta_m / 100.0, m.omega_m, m.omega_f, m.tau_m, m.Q_red, 100.0, 0.1)
+    assert np.isnan(f["HF_MTW_IF"]) and any("derived" in n for n in f["notes"])
+    assert np.isfinite(f["cs_gain"])  # the current-speed features do not need the output encoder
