@@ -60,7 +60,12 @@ class ObservationModel:
 
     # ---- evaluation -----------------------------------------------------------
     def mean(self, h: np.ndarray) -> np.ndarray:
-        return np.polynomial.polynomial.polyval(np.asarray(h, float) / self.h_ref, self.coef)
+        u = np.asarray(h, float) / self.h_ref
+        out = np.full_like(u, self.coef[-1])
+        for c in self.coef[-2::-1]:  # Horner over the (few) coefficients
+            out *= u
+            out += c
+        return out
 
     def std(self, h: np.ndarray) -> np.ndarray:
         return self.s0 + self.s1 * np.maximum(np.asarray(h, float), 0.0) / self.h_ref

@@ -167,7 +167,7 @@ class ParticleFilter:
 
     def ess(self) -> float:
         w = self.weights
-        return float(1.0 / np.sum(w * w))
+        return float(1.0 / np.dot(w, w))
 
     # ---- steps ---------------------------------------------------------------
     def predict(self, u) -> None:
@@ -189,9 +189,13 @@ class ParticleFilter:
             # every particle is impossible under z: keep the prior weights and say so
             self.last = StepInfo(True, self.ess(), False, -np.inf)
             return self.last
-        log_ev = float(m + np.log(np.sum(np.exp(lw - m))))
+        w = np.exp(lw - m)
+        sw = w.sum()
+        log_ev = float(m + np.log(sw))
         self.logw = lw - log_ev
-        ess = self.ess()
+        w /= sw
+        self._w_cache = (self.logw, w)  # the normalised weights, without a second exp
+        ess = float(1.0 / np.dot(w, w))
         resampled = False
         if ess < self.ess_threshold * self.n:
             self._resample()
