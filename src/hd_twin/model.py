@@ -2,7 +2,8 @@
 
 Loss (paper eq. 1-4)::
 
-    L_tot = L_d + ramp(epoch) * [lambda_c L_c + nu * s]        (uncertainty form)
+    L_tot = exp(-s_d) L_d + s_d + ramp(epoch) * [exp(-s_c) L_c + nu s_c]   (uncertainty form)
+    lambda_c = exp(s_d - s_c)
     L_d   = mean over valid samples of ((Q_red_hat - Q_red) / sigma_Q)^2
     L_c   = 1/4 sum_j mean_t (r_j / s_j)^2
 
@@ -13,16 +14,14 @@ Loss (paper eq. 1-4)::
 * ``r_j`` are the residuals of :func:`hd_twin.physics.residuals`, evaluated on
   the interior samples (second differences of the latent states need both
   neighbours). ``s_j`` is either the running RMS of r_j (adaptive scaling:
-  exponential moving average, momentum ``scale_momentum``, detached) or the
+  exponential moving average, momentum ``scale_momentum``, detached; updated
+  during the ramp, then frozen so that L_c can still decrease) or the
   fixed characteristic magnitude of :func:`hd_twin.physics.residual_scales`.
   ``L_c_ref`` (always reported) uses the fixed magnitudes, so that curves are
   comparable across epochs whatever the scaling.
-* ``lambda_c = exp(-s)`` with a learnable log-weight ``s`` and the regulariser
-  ``nu * s`` (nu = initial lambda_c): the stationary point is lambda_c =
-  nu / L_c > 0, so the weight adapts (rises as the physics is satisfied,
-  falls while it is not) but cannot collapse to zero: d/ds at any s has the
-  restoring term +nu. ``s`` is additionally clamped to lambda_c in
-  [lambda_min, lambda_max]. ``mode="fixed"`` keeps lambda_c constant
+* ``lambda_c`` in the two-task uncertainty form (:class:`LambdaC`): at its
+  stationary point lambda_c = nu L_d / L_c > 0 (nu = initial lambda_c), so it
+  adapts but cannot collapse to zero; ``mode="fixed"`` keeps lambda_c constant
   (``lambda_c = 0`` is the pure-data ablation).
 * ``ramp`` rises linearly from 0 to 1 over ``ramp_epochs`` (0 = off).
 """
@@ -83,9 +82,25 @@ class StreamWrapper(nn.Module):
 
 
 class LambdaC(nn.Module):
-    """Physics weight lambda_c; ``mode`` "uncertainty" (learnable, cannot collapse) or "fixed"."""
+    """Physics weight lambda_c; ``mode`` "uncertainty" (learnable, cannot collapse) or "fixed".
 
-    def __init__(self, init: float, mode: str = "uncertainty", lam_min: float = 1e-4, lam_max: float = 1e3):
+    "uncertainty" is the two-task homoscedastic-uncertainty form (Kendall et
+    al. 2018) with log-weights s_d, s_c::
+
+        L = exp(-s_d) L_d + s_d + exp(-s_c) L_c + nu s_c,     nu = lambda_c(0)
+        lambda_c = exp(-s_c) / exp(-s_d)
+
+    Its stationary point is exp(-s_d) = 1/L_d, exp(-s_c) = nu/L_c, i.e.
+    lambda_c = nu L_d / L_c > 0: the weight adapts to the relative progress of
+    the two terms and cannot collapse to zero. The effective objective is
+    log L_d + nu log L_c, so a relative improvement of the physics is worth nu
+    times the same relative improvement of the data fit (scale-free, unlike a
+    single learnable weight, which would make the physics a log-barrier that
+    keeps trading data accuracy for ever-smaller residuals). s are clamped so
+    that each weight stays in [lam_min, lam_max].
+    """
+
+    def __init__(self, init: float, mode: str = "uncertainty", lam_min: float = 1e-4, lam_max: float = 1e4):
         super().__init__()
         if mode not in ("uncertainty", "fixed"):
             raise ValueError(f"lambda_c mode must be 'uncertainty' or 'fixed', got {mode!r}")
@@ -96,22 +111,29 @@ class LambdaC(nn.Module):
         self.mode, self.init = mode, float(init)
         self.lam_min, self.lam_max = float(lam_min), float(lam_max)
         if mode == "uncertainty":
+            self.s_d = nn.Parameter(torch.tensor(0.0))
             self.s = nn.Parameter(torch.tensor(-math.log(init), dtype=torch.float32))
         else:
             self.register_buffer("s", torch.tensor(-math.log(init) if init > 0 else float("inf")))
 
+    def _clamped(self, s):
+        return s.clamp(-math.log(self.lam_max), -math.log(self.lam_min))
+
     def value(self) -> torch.Tensor:
         if self.mode == "fixed":
             return torch.tensor(self.init, device=self.s.device)
-        s = self.s.clamp(-math.log(self.lam_max), -math.log(self.lam_min))
-        return torch.exp(-s)
+        return torch.exp(self._clamped(self.s_d) - self._clamped(self.s))
 
-    def term(self, L_c: torch.Tensor) -> torch.Tensor:
-        """lambda_c L_c (+ nu s for the learnable form)."""
+    def total(self, L_d: torch.Tensor, L_c: torch.Tensor | None, ramp: float = 1.0) -> torch.Tensor:
+        """The training objective from the data and physics losses (physics part scaled by the ramp)."""
         if self.mode == "fixed":
-            return self.init * L_c
-        s = self.s.clamp(-math.log(self.lam_max), -math.log(self.lam_min))
-        return torch.exp(-s) * L_c + self.init * s
+            return L_d if L_c is None or self.init == 0 else L_d + ramp * self.init * L_c
+        s_d = self._clamped(self.s_d)
+        out = torch.exp(-s_d) * L_d + s_d
+        if L_c is not None:
+            s_c = self._clamped(self.s)
+            out = out + ramp * (torch.exp(-s_c) * L_c + self.init * s_c)
+        return out
 
 
 @dataclass
@@ -269,7 +291,10 @@ class PINN(nn.Module):
             R = torch.stack(r)  # [4, B, T-2]
             ms = torch.where(m, R, torch.zeros_like(R)).pow(2).sum(dim=(1, 2)) / nm  # [4] mean squares, SI^2
             rms = ms.sqrt()
-            if update_scaler and self.training:
+            # the scales follow the residuals while the physics is ramped in (the first epoch
+            # without a ramp) and are then frozen: a scale that kept shrinking with the residuals
+            # would amplify the physics gradient without bound and trade data accuracy for it
+            if update_scaler and self.training and epoch < max(1, self.cfg.ramp_epochs):
                 self.scaler.update(rms)
             L_c = (ms / self.scaler.scales().pow(2)).mean()
             L_c_ref = (ms.detach() / self.scaler.fixed.pow(2)).mean()
@@ -278,11 +303,11 @@ class PINN(nn.Module):
         res["ramp"] = ramp
         res["lambda_c"] = float(self.lam.value().detach())
         if use_phys:
-            res["L_tot"] = L_d + ramp * self.lam.term(res["L_c"])
+            res["L_tot"] = self.lam.total(L_d, res["L_c"], ramp)
             if self.calib_names:
                 res["L_tot"] = res["L_tot"] + self.calib_reg * (self.calib**2).sum()
             res["L_tot_report"] = (L_d + res["lambda_c"] * res["L_c_ref"]).detach()
         else:
-            res["L_tot"] = L_d
+            res["L_tot"] = self.lam.total(L_d, None)
             res["L_tot_report"] = L_d.detach()
         return res

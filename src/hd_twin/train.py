@@ -510,7 +510,7 @@ def load_pinn(model_dir: str | Path):
     except FileNotFoundError:
         raise ValueError(f"{model_dir}: model.pt missing") from None
     missing, unexpected = pinn.load_state_dict(sd, strict=False)
-    if unexpected or set(missing) - {"calib"}:  # models written before calibration existed lack "calib"
+    if unexpected or set(missing) - {"calib", "lam.s_d"}:  # older models lack these (defaults reproduce them)
         raise ValueError(f"{model_dir}/model.pt does not match config.json (missing {missing}, unexpected {unexpected})")
     pinn.eval()
     return pinn, norm, cfgd

@@ -63,10 +63,11 @@ def test_physics_loss_is_mean_of_scaled_squared_residuals():
     expect = np.mean([float((rj.detach() ** 2).mean()) / s[j] ** 2 for j, rj in enumerate(r)])
     assert float(res["L_c"]) == pytest.approx(expect, rel=1e-4)
     assert float(res["L_c_ref"]) == pytest.approx(expect, rel=1e-4)
-    # the total is L_d + ramp * (lambda L_c + nu s)
-    lam = m.lam.value().item()
-    tot = float(res["L_d"]) + res["ramp"] * (lam * float(res["L_c"]) + 0.08 * float(m.lam.s))
+    # the total is exp(-s_d) L_d + s_d + ramp * (exp(-s_c) L_c + nu s_c); lambda_c = exp(s_d - s_c)
+    s_d, s_c = float(m.lam.s_d), float(m.lam.s)
+    tot = math.exp(-s_d) * float(res["L_d"]) + s_d + res["ramp"] * (math.exp(-s_c) * float(res["L_c"]) + 0.08 * s_c)
     assert float(res["L_tot"]) == pytest.approx(tot, rel=1e-5)
+    assert m.lam.value().item() == pytest.approx(math.exp(s_d - s_c), rel=1e-6)
 
 
 def test_adaptive_scaling_switch():
@@ -98,31 +99,32 @@ def test_ramp_switch():
     r0 = m.losses(b, epoch=0)
     r9 = m.losses(b, epoch=9)
     assert r0["ramp"] < 1.0 and r9["ramp"] == 1.0
-    assert float(r0["L_tot"] - r0["L_d"]) < float(r9["L_tot"] - r9["L_d"])
+    assert float(r0["L_tot"] - m.lam.total(r0["L_d"], None)) < float(r9["L_tot"] - m.lam.total(r9["L_d"], None))
 
 
 def test_lambda_c_cannot_collapse_to_zero():
-    """A raw learnable weight on a positive loss goes to zero; the uncertainty form settles at nu / L_c > 0."""
-    L_c = torch.tensor(5.0)
+    """A raw learnable weight on a positive loss runs away; the uncertainty form settles at nu L_d / L_c > 0."""
+    L_d, L_c = torch.tensor(0.02), torch.tensor(5.0)
     raw = torch.nn.Parameter(torch.tensor(0.08))
     lam = LambdaC(0.08, "uncertainty")
     opt = torch.optim.Adam([raw, *lam.parameters()], lr=0.05)
     traj = []
-    for _ in range(3000):
+    for _ in range(4000):
         opt.zero_grad()
-        (raw * L_c + lam.term(L_c)).backward()
+        (L_d + raw * L_c + lam.total(L_d, L_c)).backward()
         opt.step()
         traj.append(lam.value().item())
     assert raw.item() < 0  # the naive form runs away (through zero)
-    assert min(traj) > 0.5 * 0.08 / 5.0 and lam.value().item() == pytest.approx(0.08 / 5.0, rel=0.05)
-    # when physics is satisfied better (small L_c) the weight rises
+    expect = 0.08 * 0.02 / 5.0
+    assert min(traj) > 0.5 * expect and lam.value().item() == pytest.approx(expect, rel=0.05)
+    # better-satisfied physics (smaller L_c) -> larger weight
     lam2 = LambdaC(0.08, "uncertainty")
     opt2 = torch.optim.Adam(lam2.parameters(), lr=0.05)
-    for _ in range(3000):
+    for _ in range(4000):
         opt2.zero_grad()
-        lam2.term(torch.tensor(0.2)).backward()
+        lam2.total(L_d, torch.tensor(0.2)).backward()
         opt2.step()
-    assert lam2.value().item() == pytest.approx(0.4, rel=0.05)
+    assert lam2.value().item() == pytest.approx(0.08 * 0.02 / 0.2, rel=0.05)
     # bounded even for a vanishing physics loss
     lam3 = LambdaC(0.08, "uncertainty", lam_max=10.0)
     with torch.no_grad():
@@ -166,7 +168,7 @@ def test_parameter_calibration_is_learnable_and_regularised():
     assert cp.T_C == pytest.approx(ph.TwinParams().T_C * math.exp(-0.2), rel=1e-6)
     assert cp.k_b == ph.TwinParams().k_b  # not calibrated: the prior
     r = m.losses(_batch())
-    base = r["L_d"] + r["ramp"] * m.lam.term(r["L_c"])
+    base = m.lam.total(r["L_d"], r["L_c"], r["ramp"])
     assert float(r["L_tot"] - base) == pytest.approx(0.5 * (0.1**2 + 0.2**2), rel=1e-4)  # the prior term
     with pytest.raises(ValueError, match="cannot calibrate"):
         PINN(TwinLSTM(len(D.FEATURES), 3, 8, 1, 0.0), ph.TwinParams(), list(ph.DEFAULT_EFFECTS), 0.0, 10.0, cfg,
