@@ -72,8 +72,9 @@ def main(argv: list[str] | None = None) -> int:
     model, obs = _setup(n)
     W = 1e5
     X, z = _truth(model, obs, 80, W, seed=11)
-    print(f"model: ArchardWear (h, log_kappa), heteroscedastic observation; {n} particles; "
-          f"synthetic truth fails at step {int(np.argmax(X[:, 0] >= model.h_fail))}")
+    fail = np.flatnonzero(X[:, 0] >= model.h_fail)
+    print(f"model: ArchardWear (h, log_kappa), heteroscedastic observation; {n} particles; synthetic truth "
+          + (f"fails at step {fail[0]}" if len(fail) else f"still below h_fail after {len(X) - 1} steps"))
 
     # ---- our PF step ------------------------------------------------------------
     pf = ParticleFilter(model, n, seed=0)
