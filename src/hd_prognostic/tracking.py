@@ -21,6 +21,9 @@ from hd_prognostic.pf import ParticleFilter, weighted_quantile
 from hd_prognostic.rul import FutureExposure, RULResult, rul_distribution
 
 
+QUANTILE_LEVELS = np.linspace(0.01, 0.97, 49)
+
+
 @dataclass
 class RULHistory:
     """Per-step filter summaries and RUL predictions of one unit."""
@@ -48,6 +51,11 @@ class RULHistory:
                                            "ess", "rul_t", "p5", "p50", "p95", "mean", "threshold")}
         d["meta"] = {k: v for k, v in self.meta.items() if k != "snapshots"}
         d["state_names"] = list(self.state_names)
+        # the RUL distribution per prediction as 49 equally spaced quantiles (1 %..97 %, step 2 %):
+        # enough for PIT and CRPS when the history is scored later
+        if self.samples:
+            d["rul_quantile_levels"] = QUANTILE_LEVELS.tolist()
+            d["rul_quantiles"] = [np.quantile(s_, QUANTILE_LEVELS).tolist() for s_ in self.samples]
         return _clean(d)
 
     @classmethod
@@ -56,6 +64,8 @@ class RULHistory:
         for k in ("t", "z", "state_mean", "state_p5", "state_p95", "ess", "rul_t", "p5", "p50", "p95", "mean"):
             setattr(h, k, [(_unclean(v)) for v in d.get(k, [])])
         h.state_names = tuple(d.get("state_names", ()))
+        if "rul_quantiles" in d:
+            h.samples = [np.asarray(_unclean(q), float) for q in d["rul_quantiles"]]
         h.threshold = _unclean(d.get("threshold"))
         h.meta = d.get("meta", {})
         return h

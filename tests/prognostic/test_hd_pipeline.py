@@ -67,3 +67,4 @@ def test_prognose_cli_and_metrics(tmp_path):
     assert rc == 0
     m = json.loads((out / "metrics.json").read_text())
     assert m["n_predictions"] == 4 and (out / "alpha_lambda.png").exists()
+    assert len(hist["rul_quantiles"]) == 4 and np.isfinite(m["crps_mean"])
