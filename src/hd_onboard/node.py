@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -54,6 +55,7 @@ PARAMS: dict[str, Any] = {
     "short_path_max": 32,  # a callback with at most this many samples uses the per-sample short path
     "residual_rows": 100,  # residual rows per /hd/onboard/residuals message (sooner on a level change)
     "feature_thread": True,  # window statistics/features in a worker thread (never delays a flag)
+    "rt_thread": False,  # joint states on their own node + executor thread (lowest latency; not for in-process replay)
     "latency_probe": False,  # bench only: record wall-clock now - header.stamp per sample (stamps must be wall time)
 }
 
@@ -126,7 +128,22 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.pub_res = self.create_publisher(Float64MultiArray, ru.TOPIC_RESIDUALS, ru.topic_qos(ru.TOPIC_RESIDUALS))
             self.pub_feat = self.create_publisher(Float64MultiArray, ru.TOPIC_FEATURES, ru.topic_qos(ru.TOPIC_FEATURES))
             self.pub_diag = self.create_publisher(DiagnosticArray, ru.TOPIC_DIAGNOSTICS, ru.qos("diagnostics"))
-            self.sub_js = self.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js, ru.qos("sensor"), raw=True)
+            self._lock = threading.RLock()  # the core is shared by the joint-state thread and the others
+            self._rt = None
+            if self.p["rt_thread"]:
+                # joint states alone in a wait set (a few entities instead of all the node's): the executor's
+                # per-wake cost, not the core, dominates the arrival -> flag latency at 1 kHz
+                from rclpy.executors import SingleThreadedExecutor
+
+                self._rt_node = Node(NODE_NAME + "_rt", context=context, start_parameter_services=False)
+                self.sub_js = self._rt_node.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js_locked,
+                                                                ru.qos("sensor"), raw=True)
+                self._rt_exec = SingleThreadedExecutor(context=context)
+                self._rt_exec.add_node(self._rt_node)
+                self._rt_stop = threading.Event()
+                self._rt = threading.Thread(target=self._rt_spin, name="onboard-joint-states", daemon=True)
+            else:
+                self.sub_js = self.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js, ru.qos("sensor"), raw=True)
             self.sub_cmd = self.create_subscription(JointState, ru.TOPIC_COMMAND, self._on_cmd, ru.qos("sensor"), raw=True)
             self.sub_tmp = self.create_subscription(Temperature, ru.TOPIC_TEMPERATURE, self._on_temp, ru.qos("sensor"), raw=True)
             self.sub_mission = self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.qos("latched"))
@@ -135,6 +152,21 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.create_timer(max(0.1, self.p["stale_timeout_s"] / 4), self._on_timer)
             self._new_core()
             self.get_logger().info(f"onboard up: twin={self.core.expected.kind} {self.core.expected.version}")
+            if self._rt is not None:
+                self._rt.start()
+
+        def _rt_spin(self):
+            while not self._rt_stop.is_set() and self.context.ok():
+                try:
+                    self._rt_exec.spin_once(timeout_sec=0.1)
+                except Exception as e:  # noqa: BLE001 - shutdown races end the thread quietly
+                    if not self._rt_stop.is_set() and self.context.ok():
+                        self.get_logger().error(f"joint-state thread: {type(e).__name__}: {e}")
+                    return
+
+        def _on_js_locked(self, first):
+            with self._lock:
+                self._on_js(first)
 
         # ---- core management --------------------------------------------------
         def _new_core(self):
@@ -150,6 +182,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.level = OK
 
         def _on_mission(self, msg):
+            with self._lock:
+                return self._on_mission_impl(msg)
+
+        def _on_mission_impl(self, msg):
             try:
                 meta = ru.parse_json_msg(msg, ru.TOPIC_MISSION)
                 float(meta.get("gear_ratio", "nan"))
@@ -222,6 +258,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 self.n_published[ru.TOPIC_RESIDUALS] += 1
 
         def _on_twin(self, msg):
+            with self._lock:
+                return self._on_twin_impl(msg)
+
+        def _on_twin_impl(self, msg):
             try:
                 st = ru.parse_json_msg(msg, ru.TOPIC_TWIN_STATE)
                 params = ph.TwinParams.from_dict(st.get("params", {}), where=ru.TOPIC_TWIN_STATE) if st.get("params") else self.twin_params
@@ -336,6 +376,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.n_published[ru.TOPIC_FEATURES] += 1
 
         def _on_cmd(self, first):
+            with self._lock:
+                return self._on_cmd_impl(first)
+
+        def _on_cmd_impl(self, first):
             for b in ru.take_all(self.sub_cmd, first):
                 try:
                     s, _, _, pos, _, _ = ru.decode_joint_state(b)
@@ -349,6 +393,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.last_wall[ru.TOPIC_COMMAND] = time.monotonic()
 
         def _on_temp(self, first):
+            with self._lock:
+                return self._on_temp_impl(first)
+
+        def _on_temp_impl(self, first):
             for b in ru.take_all(self.sub_tmp, first):
                 try:
                     s, frame, v = ru.decode_temperature(b)
@@ -415,6 +463,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.n_published[ru.TOPIC_DIAGNOSTICS] += 1
 
         def _on_timer(self):
+            with self._lock:
+                return self._on_timer_impl()
+
+        def _on_timer_impl(self):
             if self.core is not None and len(self.core.rows):
                 self._flush_rows()
             if self._pending_feat:
@@ -435,6 +487,11 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self._drain_windows(wait=True)
 
         def destroy_node(self):
+            if self._rt is not None:
+                self._rt_stop.set()
+                self._rt.join(timeout=2.0)
+                self._rt_exec.shutdown()
+                self._rt_node.destroy_node()
             if self._pool is not None:
                 self._pool.shutdown(wait=True)
             return super().destroy_node()

@@ -747,12 +747,31 @@ def _split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
     return argv, []
 
 
+def _pop_domain(args) -> None:
+    """argparse REMAINDER also takes options written after the node name: move ``--domain-id N`` out."""
+    ra = list(args.ros_args or [])
+    end = ra.index("--ros-args") if "--ros-args" in ra else len(ra)
+    head, tail = ra[:end], ra[end:]
+    for k, tok in enumerate(head):
+        if tok.startswith("--domain-id"):
+            val = tok.split("=", 1)[1] if "=" in tok else (head[k + 1] if k + 1 < len(head) else None)
+            if val is None or not val.lstrip("-").isdigit():
+                raise SystemExit(f"hdphm: --domain-id needs an integer, got {val!r}")
+            args.domain_id = int(val)
+            del head[k:k + (1 if "=" in tok else 2)]
+            break
+    if head:
+        raise SystemExit(f"hdphm: unexpected arguments {head}; node parameters go after --ros-args")
+    args.ros_args = tail
+
+
 def cmd_node(args) -> int:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
     from hdphm import rosutil as ru
 
+    _pop_domain(args)
     ctx = ru.init_context(args.domain_id, ros_args_for(args.name, args.ros_args))
     node = make_node(args.name, ctx)
     ex = SingleThreadedExecutor(context=ctx)
@@ -770,6 +789,7 @@ def cmd_node(args) -> int:
 def cmd_stack(args) -> int:
     from rclpy.parameter import Parameter  # noqa: F401
 
+    _pop_domain(args)
     argv = ["hdphm"]
     for n in NODES:
         cfg = CONFIG_DIR / f"{n}.yaml"

@@ -188,3 +188,27 @@ def test_record_split_per_mission_across_processes(tmp_path, domain_id):
         a, src = read_mission(str(f)), read_mission(b)
         assert a.n == src.n and len(a.t_cmd) == len(src.t_cmd)
         np.testing.assert_array_equal(a.tau_m, src.tau_m)
+
+
+def test_onboard_rt_thread_mode(tmp_path, domain_id):
+    """rt_thread: joint states on their own executor thread; every sample processed, fault flagged."""
+    from synth import make_mission
+
+    from hdphm.ros_cli import Replayer
+
+    bag = str(tmp_path / "f.mcap")
+    write_mission(bag, make_mission(duration=8.0, seed=31, fault_at=6.0))
+    st = Stack(domain_id, nodes=("twin", "onboard"), overrides={"onboard": {"rt_thread": True}})
+    try:
+        st.spin_for(0.3)
+        rep = Replayer(st.aux, "max", pump=st.pump)
+        rep.play(bag)
+        onb = st.nodes["onboard"]
+        end = time.monotonic() + 20
+        while time.monotonic() < end and onb.n_msgs[ru.TOPIC_JOINT_STATES] < rep.counts[ru.TOPIC_JOINT_STATES]:
+            st.spin_for(0.05)
+        assert onb.n_msgs[ru.TOPIC_JOINT_STATES] == rep.counts[ru.TOPIC_JOINT_STATES] == 8000
+        assert onb.core.health.n_samples == 8000 and not onb.errors
+        assert onb.flags and 0 <= onb.flags[0][1] * 1e-9 - (1_700_000_000 + 6.0) < 0.5
+    finally:
+        st.close()
