@@ -183,6 +183,13 @@ class OnnxTwinExpected:
             self._last = float(res[-1])
         return res
 
+    def step_one(self, t: float, x: np.ndarray) -> float:
+        """One sample (the onboard short path): same as :meth:`step` on a one-row block."""
+        q = self.twin.step(x[None, :])["Q_red"]
+        if len(q) and np.isfinite(q[-1]):
+            self._last = float(q[-1])
+        return self._last
+
 
 def make_expected(model_dir: str | None, params: ph.TwinParams, effects=ph.DEFAULT_EFFECTS,
                   fs_hz: float = 1000.0, log=None) -> Any:

@@ -212,3 +212,23 @@ def test_onboard_rt_thread_mode(tmp_path, domain_id):
         assert onb.flags and 0 <= onb.flags[0][1] * 1e-9 - (1_700_000_000 + 6.0) < 0.5
     finally:
         st.close()
+
+
+def test_onnx_twin_short_path_equals_block_path(fleet):
+    """The ONNX twin's per-sample step gives the one-row-block numbers (LSTM state carried)."""
+    from hd_onboard.core import OnboardCore
+    from hd_onboard.expected import make_expected
+    from hd_twin import physics as ph
+
+    m = sim_mission(3, 5, duration=6.0)
+    stamps = m.t0_ns + np.round(m.t * 1e9).astype(np.int64)
+    V = np.column_stack([m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red])
+    V[3000:3003, 4] = np.nan
+    p = ph.TwinParams.from_yaml().with_meta(gear_ratio=m.meta.gear_ratio)
+    a = OnboardCore(make_expected(fleet["model"], p), p)
+    A = np.concatenate([a.push(stamps[i:i + 1], V[i:i + 1]).table for i in range(len(stamps))])
+    b = OnboardCore(make_expected(fleet["model"], p), p)
+    assert a.expected.kind == b.expected.kind == "onnx_twin"
+    for s_, v_ in zip(stamps.tolist(), V.tolist()):
+        b.push_one(s_, v_)
+    np.testing.assert_allclose(b.take_rows(), A, rtol=1e-9, atol=1e-9, equal_nan=True)
