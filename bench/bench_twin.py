@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     X = D.mission_inputs(m)
     tw = StreamingTwin(model_dir, fs_in=fs_model, gear_ratio=m.meta.gear_ratio)
     net = pinn.net.eval()
-    Z = torch.from_numpy(norm.norm_features(D.features(X, m.meta.gear_ratio)).astype(np.float32))[None]
+    Z = torch.from_numpy(norm.norm_features(D.features(X, m.meta.gear_ratio, 1.0 / fs_model)).astype(np.float32))[None]
     L, H = net.layers, net.hidden
 
     def onnx_one():

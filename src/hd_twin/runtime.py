@@ -77,11 +77,9 @@ class StreamingTwin:
 
         if self._sos is None:
             return X
-        if self._zi is None:
-            self._zi = np.stack([sps.sosfilt_zi(self._sos) * X[0, j] for j in range(X.shape[1])])
-        out = np.empty_like(X)
-        for j in range(X.shape[1]):
-            out[:, j], self._zi[j] = sps.sosfilt(self._sos, X[:, j], zi=self._zi[j])
+        if self._zi is None:  # steady state at the first sample, per input (as in training)
+            self._zi = sps.sosfilt_zi(self._sos)[:, :, None] * X[0][None, None, :]
+        out, self._zi = sps.sosfilt(self._sos, X, axis=0, zi=self._zi)
         return out
 
     def step(self, X: np.ndarray) -> dict[str, np.ndarray]:
