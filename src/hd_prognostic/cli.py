@@ -157,7 +157,7 @@ def _battery(args) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    r = run_battery(n_particles=args.particles, seed=args.seed, t_start=args.t_start)
+    r = run_battery(n_particles=args.particles, seed=args.seed, t_start=args.t_start, regen_nu=args.regen_nu)
     hists = [u["history"] for u in r["units"].values()]
     eols = [h.meta["t_eol"] for h in hists]
     save_alpha_lambda_grid(out / "battery_alpha_lambda.png", hists, eols, 0.2, unit="cycle",
@@ -272,6 +272,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--t-start", type=float, default=20.0, help="first prediction cycle")
+    p.add_argument("--regen-nu", type=float, default=0.0,
+                   help="dof of the upper (capacity-regeneration) likelihood tail; 0 = symmetric Student-t")
     p.set_defaults(func=_guard(_battery))
     p = s.add_parser("virkler", help="Virkler crack growth, Paris-law PF, 2-fold over specimens")
     p.add_argument("--out", default="runs/prognostic_virkler")

@@ -204,7 +204,7 @@ def ukf_history(a: ActuatorData, obs: ObservationModel, n_samples: int = 2000, s
     """UKF baseline on the same model and data: median/P5/P95 RUL per mission."""
     from hd_prognostic.ukf import UnscentedKalmanFilter
 
-    model = build_model(obs)
+    model = build_model(obs, offset_mode="state")
     t, y, expo = mission_sequence(a, obs)
     ukf = UnscentedKalmanFilter.from_prior(model, seed=seed)
     rng = np.random.default_rng(seed)

@@ -31,6 +31,8 @@ from hd_prognostic.observation import ObservationModel
 from hd_prognostic.tracking import RULHistory, track
 
 TOPIC_HEALTH = "/sim/health"
+_DRIFT_BLOCK = 10  # missions per block when measuring the drift of the wear coefficient
+_SIGMA_LK_FLOOR = 0.003  # per mission: a 10 % change of kappa over ~100 missions stays trackable
 DEFAULT_OBS_MODEL = Path(__file__).with_name("default_obs_model.json")
 
 
@@ -188,7 +190,7 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
       scatter of per-mission increments around kappa_i W_k; h0 from the
       first-mission wear; h_fail the population median.
     """
-    hs, ys, lk, lres, h0, hf, Ws = [], [], [], [], [], [], []
+    hs, ys, lk, lres, h0, hf, Ws, drift = [], [], [], [], [], [], [], []
     tmp = ObservationModel(feature=feature, baseline=baseline, n_baseline=n_baseline)
     if fuse:
         for a in train:
@@ -213,10 +215,18 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
             kap = dh[ok].sum() / Wp[ok].sum()
             lk.append(np.log(kap))
             lres.append(np.log(dh[ok] / (kap * Wp[ok])))
+            # drift of the wear coefficient over life: ln kappa of consecutive 10-mission blocks
+            nb = int(ok.sum()) // _DRIFT_BLOCK
+            if nb >= 2:
+                dk = dh[ok][: nb * _DRIFT_BLOCK].reshape(nb, -1).sum(1)
+                wk = Wp[ok][: nb * _DRIFT_BLOCK].reshape(nb, -1).sum(1)
+                drift.append(np.diff(np.log(dk / wk)))
         h0.append(a.h_true[0])
         hf.append(a.h_fail)
+    groups = np.concatenate([np.full(len(h_), i) for i, h_ in enumerate(hs)])
     obs = ObservationModel.fit(np.concatenate(hs), np.concatenate(ys), feature=feature, degree=degree,
-                               baseline=baseline, n_baseline=n_baseline, h_fail=float(np.nanmedian(hf)))
+                               baseline=baseline, n_baseline=n_baseline, h_fail=float(np.nanmedian(hf)),
+                               groups=groups)
     obs.fusion_features, obs.fusion_coef = tmp.fusion_features, tmp.fusion_coef
     if not lk:
         raise ValueError("fit_population: no training actuator has enough wear increments for the Archard prior")
@@ -230,20 +240,39 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
         "h_fail": float(np.nanmedian(hf)),
         "h_fail_std": float(np.nanstd(hf)) if len(hf) > 2 else 0.0,
         "W_median": float(np.median(np.concatenate(Ws))) if Ws else float("nan"),
+        # random-walk std of ln kappa per mission: block-to-block drift of the training units, floored so a
+        # unit whose wear law drifts (lubrication, other effects) can still be followed
+        "sigma_log_kappa": float(np.clip(np.sqrt(np.mean(np.concatenate(drift) ** 2) / (2 * _DRIFT_BLOCK))
+                                         if drift else 0.02, _SIGMA_LK_FLOOR, 0.1)),
         "n_train": len(train),
     }
     return obs
 
 
-def build_model(obs: ObservationModel, h_fail: float | None = None, sigma_log_kappa: float = 0.02) -> ArchardWear:
+def build_model(obs: ObservationModel, h_fail: float | None = None, sigma_log_kappa: float | None = None,
+                offset_mode: str = "rb", kappa_lifetime: bool = False) -> ArchardWear:
+    """The Archard model with ``obs`` attached and the prior stored in ``obs.degradation``.
+
+    With ``obs.baseline == "state"`` the per-unit feature offset is part of
+    the state: marginalised per particle (``offset_mode="rb"``, for the
+    particle filter) or one plain state column (``"state"``, for the UKF).
+    """
     deg = dict(obs.degradation)
     if not deg:
         raise ValueError("observation model has no 'degradation' prior (fit it with fit_population)")
     hf = float(h_fail if h_fail is not None else deg.get("h_fail", obs.h_fail))
+    if sigma_log_kappa is None:  # fitted on the training fleet; 0.02 for files written before it was
+        sigma_log_kappa = float(deg.get("sigma_log_kappa", 0.02))
+    off = obs.baseline == "state"
+    if off and not obs.offset_std > 0:
+        raise ValueError("observation model with baseline 'state' has no offset prior (offset_std must be > 0; "
+                         "fit it with fit_population)")
     return ArchardWear(h_fail=hf, log_kappa_mean=deg["log_kappa_mean"], log_kappa_std=deg["log_kappa_std"],
                        h0_mean=deg["h0_mean"], h0_std=deg["h0_std"], sigma_proc=deg["sigma_proc"],
                        sigma_log_kappa=sigma_log_kappa, observe_fn=obs,
-                       h_fail_std=float(deg.get("h_fail_std", 0.0)) if h_fail is None else 0.0)
+                       h_fail_std=float(deg.get("h_fail_std", 0.0)) if h_fail is None else 0.0,
+                       offset_mean=obs.offset_mean if off else 0.0, offset_std=obs.offset_std if off else 0.0,
+                       offset_mode=offset_mode, kappa_lifetime=bool(deg.get("kappa_lifetime", kappa_lifetime)))
 
 
 def mission_sequence(a: ActuatorData, obs: ObservationModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -271,11 +300,17 @@ def mission_sequence(a: ActuatorData, obs: ObservationModel) -> tuple[np.ndarray
     return full.astype(float), y, expo
 
 
+PF_DEFAULTS = dict(likelihood="student_t", roughening=0.05, kernel="liu_west", discount=0.98)
+
+
 def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000, seed: int = 0,
              likelihood: str = "student_t", max_missions: int = 2000, t_start: float | None = None,
              progress: bool = False, rul_particles: int | None = None,
-             snapshots: tuple[int, ...] = ()) -> RULHistory:
-    """Particle-filter prognosis over one actuator's missions; RUL in missions at every mission."""
+             snapshots: tuple[int, ...] = (), pf_options: dict | None = None) -> RULHistory:
+    """Particle-filter prognosis over one actuator's missions; RUL in missions at every mission.
+
+    ``pf_options`` override :data:`PF_DEFAULTS` (ParticleFilter keyword arguments).
+    """
     model = build_model(obs)
     t, y, expo = mission_sequence(a, obs)
 
@@ -286,7 +321,8 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
 
     hist = track(model, t, y, expo, future, rul_step=1.0, max_steps=max_missions,
                  t_start=t[0] if t_start is None else t_start, unit=a.actuator_id,
-                 pf_kwargs=dict(n_particles=n_particles, seed=seed, likelihood=likelihood, roughening=0.05),
+                 pf_kwargs={**PF_DEFAULTS, "likelihood": likelihood, **(pf_options or {}),
+                            "n_particles": n_particles, "seed": seed},
                  progress=progress, rul_particles=rul_particles, snapshots=snapshots)
     hours = a.operating_hours
     hist.meta.update({

@@ -57,6 +57,8 @@ class DegradationModel:
     increasing: bool = True
     time_unit: str = "step"
     observe_fn: ObserveFn | None = None
+    #: True when the model supplies ``log_likelihood(z, x)`` for the filter instead of (mean, std)
+    custom_likelihood: bool = False
 
     @property
     def n_states(self) -> int:
@@ -116,6 +118,19 @@ class ArchardWear(DegradationModel):
     estimation). The prior is lognormal on kappa (unit-to-unit scatter of
     k_D, PHYSICS.md section 4: sigma_ln 0.3-0.5) and normal on the initial
     wear.
+
+    Per-unit feature offset (``offset_std > 0``): the measured feature is
+    ``y = b + mu(h) + e``, ``b`` the unit's beginning-of-life feature level
+    with prior ``N(offset_mean, offset_std^2)``. ``offset_mode``:
+
+    * ``"rb"`` (particle filter): ``b`` is marginalised exactly per
+      particle (Rao-Blackwellisation): columns ``b`` (posterior mean) and
+      ``P_b`` (posterior variance) hold a Kalman estimate conditioned on
+      that particle's wear history; :meth:`observe` gives the predictive
+      ``N(b + mu(h), sigma(h)^2 + P_b)`` and :meth:`assimilate` (called by
+      the filter after weighting) updates ``b, P_b``. Resampling copies
+      them with the particle; no roughening is needed.
+    * ``"state"`` (UKF): ``b`` is one plain static state column.
     """
 
     h_fail: float = 30e-6  # m
@@ -128,6 +143,15 @@ class ArchardWear(DegradationModel):
     observe_fn: ObserveFn | None = None
     time_unit: str = "mission"
     h_fail_std: float = 0.0  # m, unit-to-unit scatter of the failure wear (random threshold in the RUL)
+    offset_mean: float = 0.0  # feature units, prior mean of the per-unit feature offset b
+    offset_std: float = 0.0  # feature units, prior std of b (0: no offset state)
+    offset_mode: str = "rb"  # "rb" (marginalised per particle, PF) or "state" (plain column, UKF)
+    #: kappa as the unit's life-average wear coefficient: wear is h = h0 + kappa U with U the integrated
+    #: exposure, so any move of ln kappa (random walk, kernel jitter after resampling) rescales the wear
+    #: accumulated so far instead of changing only future increments. For a wear law with a fixed
+    #: coefficient this keeps (h, kappa) consistent: a particle whose kappa is corrected is not left
+    #: with the wear that the wrong kappa accumulated (which the feature offset would then absorb).
+    kappa_lifetime: bool = False
 
     state_names = ("h", "log_kappa")
     health_index = 0
@@ -135,8 +159,67 @@ class ArchardWear(DegradationModel):
 
     def __post_init__(self) -> None:
         _positive("h_fail", self.h_fail)
-        self.param_mask = np.array([False, True])
+        if not (np.isfinite(self.offset_mean) and np.isfinite(self.offset_std) and self.offset_std >= 0):
+            raise ValueError(f"ArchardWear: offset prior must be finite with std >= 0, got "
+                             f"{self.offset_mean!r}, {self.offset_std!r}")
+        if self.offset_mode not in ("rb", "state"):
+            raise ValueError(f"ArchardWear.offset_mode must be 'rb' or 'state', got {self.offset_mode!r}")
+        if self.offset_std > 0 and self.offset_mode == "rb":
+            self.state_names = ("h", "log_kappa", "b", "P_b")
+            self.param_mask = np.array([False, True, False, False])
+        elif self.offset_std > 0:
+            self.state_names = ("h", "log_kappa", "b")
+            self.param_mask = np.array([False, True, False])
+        else:
+            self.param_mask = np.array([False, True])
         self.threshold = self.h_fail
+
+    @property
+    def has_offset(self) -> bool:
+        return self.offset_std > 0
+
+    @property
+    def n_marginalised(self) -> int:
+        """Columns holding an exact conditional posterior (not sampled): ``b`` and ``P_b`` in ``rb`` mode."""
+        return 2 if (self.has_offset and self.offset_mode == "rb") else 0
+
+    def observe(self, x):
+        """Predictive mean and std of the feature per particle (offset included when modelled)."""
+        if self.observe_fn is None:
+            raise RuntimeError("ArchardWear has no observation model attached")
+        mu, sd = self.observe_fn(x)
+        if not self.has_offset:
+            return mu, sd
+        if self.offset_mode == "state":
+            return mu + x[:, 2], sd
+        return mu + x[:, 2], np.sqrt(sd * sd + x[:, 3])
+
+    def params_moved(self, x_old_params: np.ndarray, x: np.ndarray) -> None:
+        """Called by the filter after it jittered the parameter columns (in place): with
+        ``kappa_lifetime`` the accumulated wear follows the new kappa (h - h0 scales with kappa)."""
+        if self.kappa_lifetime:
+            x[:, 0] = self.h0_mean + (x[:, 0] - self.h0_mean) * np.exp(x[:, 1] - x_old_params[:, 0])
+
+    def assimilate(self, x: np.ndarray, z: float, mean: np.ndarray, std: np.ndarray,
+                   robust_nu: float | None = None) -> None:
+        """Kalman update (in place) of each particle's offset posterior ``(b, P_b)`` with observation ``z``.
+
+        ``mean``/``std`` are :meth:`observe`'s predictive values for ``x``
+        (so nothing is recomputed). With ``robust_nu`` (Student-t
+        likelihood) the gain is down-weighted for outlying residuals
+        (weight ``(nu + 1) / (nu + r^2)``, capped at 1), as an M-estimator.
+        """
+        if not (self.has_offset and self.offset_mode == "rb"):
+            return
+        P = x[:, 3]
+        S = std * std
+        innov = z - mean
+        if robust_nu is not None:
+            wgt = np.minimum((robust_nu + 1.0) / (robust_nu + innov * innov / S), 1.0)
+            S = P + (S - P) / wgt  # measurement variance inflated by 1/weight
+        K = P / S
+        x[:, 2] += K * innov
+        x[:, 3] = P * (1.0 - K)
 
     def propagate(self, x, u, rng):
         x = self.check_state(x)
@@ -149,6 +232,8 @@ class ArchardWear(DegradationModel):
             if np.any(W < 0) or not np.all(np.isfinite(W)):
                 raise ValueError("ArchardWear: the load-sliding integral W must be finite and >= 0")
         out = np.empty_like(x)
+        if x.shape[1] > 2:
+            out[:, 2:] = x[:, 2:]  # the feature offset (and its variance) is static
         if rng is not None:
             n = len(x)
             s = self.sigma_proc
@@ -156,6 +241,8 @@ class ArchardWear(DegradationModel):
             # kappa W eps in one exp: exp(ln kappa + s e0 - s^2/2) W
             out[:, 0] = x[:, 0] + W * np.exp(x[:, 1] + (s * e[0] - 0.5 * s * s))
             out[:, 1] = x[:, 1] + self.sigma_log_kappa * e[1]
+            if self.kappa_lifetime:
+                out[:, 0] = self.h0_mean + (out[:, 0] - self.h0_mean) * np.exp(self.sigma_log_kappa * e[1])
         else:
             out[:, 0] = x[:, 0] + W * np.exp(x[:, 1])
             out[:, 1] = x[:, 1]
@@ -164,7 +251,11 @@ class ArchardWear(DegradationModel):
     def sample_prior(self, n, rng):
         h0 = np.abs(self.h0_mean + self.h0_std * rng.standard_normal(n))
         lk = self.log_kappa_mean + self.log_kappa_std * rng.standard_normal(n)
-        return np.column_stack([h0, lk])
+        if not self.has_offset:
+            return np.column_stack([h0, lk])
+        if self.offset_mode == "state":
+            return np.column_stack([h0, lk, self.offset_mean + self.offset_std * rng.standard_normal(n)])
+        return np.column_stack([h0, lk, np.full(n, self.offset_mean), np.full(n, self.offset_std**2)])
 
     def rul_fast(self, x: np.ndarray, future, step: float, max_steps: int, rng: np.random.Generator,
                  n_paths: int = 256, chunk: int = 256) -> np.ndarray | None:
@@ -219,7 +310,10 @@ class ArchardWear(DegradationModel):
     def process_cov(self, x_mean, u):
         dh = np.exp(x_mean[1]) * float(np.mean(u))
         var_h = dh * dh * (np.exp(self.sigma_proc**2) - 1.0)
-        return np.diag([var_h + 1e-30, self.sigma_log_kappa**2])
+        d = [var_h + 1e-30, self.sigma_log_kappa**2]
+        if self.n_states > 2:
+            d += [1e-12 * self.offset_std**2] + [0.0] * (self.n_states - 3)
+        return np.diag(d)
 
 
 @dataclass
@@ -230,6 +324,14 @@ class ExponentialFade(DegradationModel):
     (``sigma_b`` per cycle, scaled with sqrt(dk)) so curvature changes
     (accelerating fade) are absorbed; ``w ~ N(0, sigma_C^2 dk)``. Observation:
     measured capacity ~ N(C, sigma_obs^2). Failure when ``C <= C_eol``.
+
+    Capacity regeneration (``regen_nu > 0``): after rest periods a Li-ion
+    cell's measured capacity jumps *up* and decays back within a few cycles
+    (a transient, not a reversal of the fade). The likelihood is then
+    asymmetric: Gaussian for measurements below the modelled capacity,
+    Student-t with ``regen_nu`` degrees of freedom above it (same scale, the
+    density continuous at the mode), so upward jumps barely move the fade
+    state or rate while a faster-than-modelled fade still counts fully.
     """
 
     C_eol: float = 1.4  # Ah
@@ -241,6 +343,7 @@ class ExponentialFade(DegradationModel):
     sigma_b: float = 1e-4  # 1/cycle / sqrt(cycle)
     sigma_obs: float = 0.01  # Ah
     time_unit: str = "cycle"
+    regen_nu: float = 0.0  # dof of the upper (regeneration) tail of the likelihood; 0 = symmetric
 
     state_names = ("C", "b")
     health_index = 0
@@ -255,6 +358,17 @@ class ExponentialFade(DegradationModel):
 
     def _observe(self, x):
         return x[:, 0], np.full(len(x), self.sigma_obs)
+
+    @property
+    def custom_likelihood(self) -> bool:
+        """True when the filter must use :meth:`log_likelihood` (the asymmetric regeneration form)."""
+        return self.regen_nu > 0
+
+    def log_likelihood(self, z: float, x: np.ndarray) -> np.ndarray:
+        """Asymmetric log-likelihood of measured capacity ``z`` per particle (up to a constant)."""
+        r = (z - x[:, 0]) / self.sigma_obs
+        nu = self.regen_nu
+        return np.where(r <= 0, -0.5 * r * r, -0.5 * (nu + 1.0) * np.log1p(r * r / nu))
 
     def propagate(self, x, u, rng):
         x = self.check_state(x)

@@ -12,6 +12,16 @@ value (``baseline``: ``none``, ``subtract`` or ``ratio`` of the median over
 the first ``n_baseline`` missions): that uses only the unit's own early
 observations, which the onboard node has too. Saved as a small JSON that the
 prognostic node loads.
+
+``baseline = "state"``: the unit's feature offset ``b`` (its beginning-of-life
+level, e.g. the manufacturing kinematic error A2) is not subtracted from a
+few early missions but estimated jointly with the wear: ``y = b + mu(h) + e``
+with ``mu(0) = 0`` and a population prior ``b ~ N(offset_mean, offset_std^2)``
+(per-unit intercepts of the training fit). The filter carries ``b`` as an
+exactly marginalised (Rao-Blackwellised) Gaussian per particle (see
+:class:`hd_prognostic.models.ArchardWear`), so every mission refines it; a
+median of three noisy early missions left a 1-2 um wear bias for the whole
+life. ``normalise`` returns the raw feature in this mode.
 """
 
 from __future__ import annotations
@@ -22,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-BASELINES = ("none", "subtract", "ratio")
+BASELINES = ("none", "subtract", "ratio", "state")
 
 
 @dataclass
@@ -47,6 +57,9 @@ class ObservationModel:
     #: (a least-squares wear regression fitted on the training population, in m of wear).
     fusion_features: list[str] = field(default_factory=list)
     fusion_coef: list[float] = field(default_factory=list)
+    #: ``baseline = "state"``: population prior of the per-unit feature offset b (feature units)
+    offset_mean: float = 0.0
+    offset_std: float = 0.0
 
     def __post_init__(self) -> None:
         if self.baseline not in BASELINES:
@@ -57,6 +70,9 @@ class ObservationModel:
             raise ValueError(f"ObservationModel: s0, s1 must be finite and >= 0, got {self.s0}, {self.s1}")
         if self.s0 + self.s1 <= 0:
             raise ValueError("ObservationModel: the noise std must be positive somewhere (s0 + s1 > 0)")
+        if not (np.isfinite(self.offset_mean) and np.isfinite(self.offset_std) and self.offset_std >= 0):
+            raise ValueError("ObservationModel: offset_mean must be finite and offset_std finite and >= 0, "
+                             f"got {self.offset_mean!r}, {self.offset_std!r}")
 
     # ---- evaluation -----------------------------------------------------------
     def mean(self, h: np.ndarray) -> np.ndarray:
@@ -91,7 +107,7 @@ class ObservationModel:
         """Per-actuator baseline normalisation of a feature series in mission order (causal: the node
         can compute the same value at every mission)."""
         y = np.asarray(y, float)
-        if self.baseline == "none" or len(y) == 0:
+        if self.baseline in ("none", "state") or len(y) == 0:
             return y
         b = self.baselines(y)
         return y - b if self.baseline == "subtract" else y / b
@@ -127,13 +143,20 @@ class ObservationModel:
     # ---- fitting --------------------------------------------------------------
     @classmethod
     def fit(cls, h: np.ndarray, y: np.ndarray, feature: str = "HF_MTW_IF", degree: int = 2,
-            baseline: str = "none", n_baseline: int = 3, h_fail: float = float("nan")) -> "ObservationModel":
+            baseline: str = "none", n_baseline: int = 3, h_fail: float = float("nan"),
+            groups: np.ndarray | None = None) -> "ObservationModel":
         """Least-squares mean polynomial, then a linear fit of the scaled absolute residuals for sigma.
 
         ``h`` and ``y`` are pooled over the training actuators (``y``
         already normalised with the same ``baseline``). sigma is fitted on
         sqrt(pi/2) |residual| (unbiased for a Gaussian) with non-negative
         coefficients (projected least squares).
+
+        ``baseline = "state"`` needs ``groups`` (the training unit of each
+        pair): the mean is then ``b_i + sum_{j>=1} c_j u^j`` with one
+        intercept ``b_i`` per unit (joint least squares, ``coef[0] = 0``),
+        and ``offset_mean``/``offset_std`` are the mean and sample std of
+        the ``b_i`` (the prior of an unseen unit's offset).
         """
         h, y = np.asarray(h, float), np.asarray(y, float)
         ok = np.isfinite(h) & np.isfinite(y)
@@ -142,8 +165,23 @@ class ObservationModel:
         h, y = h[ok], y[ok]
         h_ref = float(np.percentile(np.abs(h), 95)) or 1e-6
         u = h / h_ref
-        coef = np.polynomial.polynomial.polyfit(u, y, degree)
-        r = y - np.polynomial.polynomial.polyval(u, coef)
+        off_mean = off_std = 0.0
+        if baseline == "state":
+            if groups is None:
+                raise ValueError("ObservationModel.fit: baseline 'state' needs the unit of each pair (groups)")
+            g = np.asarray(groups)[ok]
+            units, gi = np.unique(g, return_inverse=True)
+            if len(units) < 2:
+                raise ValueError("ObservationModel.fit: baseline 'state' needs >= 2 training units for the offset prior")
+            A = np.column_stack([np.eye(len(units))[gi]] + [u**j for j in range(1, degree + 1)])
+            sol, *_ = np.linalg.lstsq(A, y, rcond=None)
+            b_i = sol[: len(units)]
+            coef = np.concatenate([[0.0], sol[len(units):]])
+            r = y - A @ sol
+            off_mean, off_std = float(np.mean(b_i)), float(np.std(b_i, ddof=1))
+        else:
+            coef = np.polynomial.polynomial.polyfit(u, y, degree)
+            r = y - np.polynomial.polynomial.polyval(u, coef)
         a = np.sqrt(np.pi / 2) * np.abs(r)
         A = np.column_stack([np.ones_like(u), np.maximum(u, 0)])
         s, *_ = np.linalg.lstsq(A, a, rcond=None)
@@ -159,8 +197,12 @@ class ObservationModel:
         info = {"n": int(len(h)), "degree": degree, "rmse": float(np.sqrt(np.mean(r * r))),
                 "r2": float(1 - np.sum(r * r) / max(np.sum((y - y.mean()) ** 2), 1e-300)),
                 "h_max": float(h.max()), "mean_monotone_on_range": mono}
+        if baseline == "state":
+            info["offset_per_unit"] = [float(v) for v in b_i]
+            s0 = max(s0, 1e-6 * off_std)
         return cls(feature=feature, coef=[float(c) for c in coef], s0=s0, s1=float(s[1]), h_ref=h_ref,
-                   baseline=baseline, n_baseline=n_baseline, h_fail=float(h_fail), fit_info=info)
+                   baseline=baseline, n_baseline=n_baseline, h_fail=float(h_fail), fit_info=info,
+                   offset_mean=off_mean, offset_std=max(off_std, 1e-300) if baseline == "state" else 0.0)
 
     # ---- persistence ----------------------------------------------------------
     def to_json(self, path: str | Path) -> Path:

@@ -114,6 +114,15 @@ class ParticleFilter:
         ``K * range * n^(-1/d)`` after each resampling (0 disables).
     likelihood : ``gaussian`` or ``student_t`` (robust to outliers).
     nu : Student-t degrees of freedom.
+    kernel : ``"gordon"`` (roughening as above) or ``"liu_west"``: after
+        resampling, parameter columns move by the Liu & West (2001)
+        shrinkage kernel ``a theta_i + (1 - a) mean + sqrt(1 - a^2) std eps``
+        with ``a = (3 delta - 1) / (2 delta)``, discount ``delta`` (default
+        0.98): the particle cloud is rejuvenated without inflating the
+        parameter posterior's mean or variance (Gordon roughening inflates
+        it at every resampling; a static parameter then never settles, and
+        without jitter it collapses onto a few prior draws).
+    discount : Liu-West discount factor delta in (0, 1].
     """
 
     def __init__(
@@ -127,7 +136,15 @@ class ParticleFilter:
         likelihood: str = "gaussian",
         nu: float = 4.0,
         particles: np.ndarray | None = None,
+        kernel: str = "gordon",
+        discount: float = 0.98,
     ) -> None:
+        if kernel not in ("gordon", "liu_west"):
+            raise ValueError(f"unknown parameter kernel {kernel!r}; 'gordon' or 'liu_west'")
+        if not (0 < discount <= 1):
+            raise ValueError(f"discount must be in (0, 1], got {discount}")
+        self.kernel = kernel
+        self.discount = float(discount)
         if resampling not in RESAMPLERS:
             raise ValueError(f"unknown resampling scheme {resampling!r}; one of {RESAMPLERS}")
         if likelihood not in LIKELIHOODS:
@@ -180,8 +197,12 @@ class ParticleFilter:
         if z is None or not np.isfinite(z):
             self.last = StepInfo(False, self.ess(), False, 0.0)
             return self.last
-        mean, std = self.model.observe(self.x)
-        ll = log_likelihood(float(z), mean, std, self.likelihood, self.nu)
+        if getattr(self.model, "custom_likelihood", False):  # the model's own (e.g. asymmetric) likelihood
+            mean = std = None
+            ll = self.model.log_likelihood(float(z), self.x)
+        else:
+            mean, std = self.model.observe(self.x)
+            ll = log_likelihood(float(z), mean, std, self.likelihood, self.nu)
         ll = np.where(np.isfinite(ll), ll, -np.inf)
         lw = self.logw + ll
         m = lw.max()
@@ -189,6 +210,10 @@ class ParticleFilter:
             # every particle is impossible under z: keep the prior weights and say so
             self.last = StepInfo(True, self.ess(), False, -np.inf)
             return self.last
+        assimilate = getattr(self.model, "assimilate", None)
+        if assimilate is not None and mean is not None:
+            # Rao-Blackwellised columns (e.g. the feature offset): exact per-particle update after weighting
+            assimilate(self.x, float(z), mean, std, self.nu if self.likelihood == "student_t" else None)
         w = np.exp(lw - m)
         sw = w.sum()
         log_ev = float(m + np.log(sw))
@@ -213,11 +238,23 @@ class ParticleFilter:
         self.logw = np.full(self.n, -np.log(self.n))
         self.n_resample += 1
         pm = np.asarray(self.model.param_mask, bool)
-        if self.roughening > 0 and pm.any():
-            d = self.x.shape[1]
+        moved = getattr(self.model, "params_moved", None)
+        old = self.x[:, pm].copy() if (moved is not None and pm.any()) else None
+        if self.kernel == "liu_west" and pm.any():
+            # mean and std of the resampled (equally weighted) parameter cloud
+            th = self.x[:, pm]
+            mu, sd = th.mean(axis=0), th.std(axis=0)
+            a = (3.0 * self.discount - 1.0) / (2.0 * self.discount)
+            self.x[:, pm] = a * th + (1.0 - a) * mu + np.sqrt(max(1.0 - a * a, 0.0)) * sd * \
+                self.rng.standard_normal(th.shape)
+        elif self.roughening > 0 and pm.any():
+            # dimension of the sampled state (Rao-Blackwellised columns are not sampled)
+            d = max(self.x.shape[1] - int(getattr(self.model, "n_marginalised", 0)), 1)
             span = np.ptp(self.x[:, pm], axis=0)
             sig = self.roughening * span * self.n ** (-1.0 / d)
             self.x[:, pm] += sig * self.rng.standard_normal((self.n, int(pm.sum())))
+        if old is not None:
+            moved(old, self.x)  # let the model keep states that depend on the parameters consistent
 
     # ---- summaries -----------------------------------------------------------
     def mean(self) -> np.ndarray:

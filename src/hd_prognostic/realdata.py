@@ -95,11 +95,13 @@ def fit_fade_prior(curves: list[tuple[np.ndarray, np.ndarray]]) -> dict:
 
 def run_battery(cells=("B0005", "B0006", "B0007"), eol_fracs=(0.7, 0.8), n_particles: int = 2000,
                 t_start: float = 20.0, seed: int = 0, data_dir: Path | None = None,
-                likelihood: str = "student_t", progress: bool = False) -> dict:
+                likelihood: str = "student_t", progress: bool = False, regen_nu: float = 0.0) -> dict:
     """Leave-one-cell-out PF prognosis of every cell for each EOL definition.
 
     Returns ``{"units": {f"{cell}@{frac}": {"history": RULHistory, "metrics": ..., "prior": ...}}, "aggregate": ...}``.
     Cells that never reach the EOL capacity inside the data are reported as skipped.
+    ``regen_nu > 0``: asymmetric regeneration-aware likelihood (see
+    :class:`ExponentialFade`; 1.0 = Cauchy upper tail); 0 (default): the symmetric ``likelihood``.
     """
     data = {c: load_battery(c, data_dir) for c in cells}
     out: dict = {"units": {}, "skipped": {}, "aggregate": {}}
@@ -113,7 +115,7 @@ def run_battery(cells=("B0005", "B0006", "B0007"), eol_fracs=(0.7, 0.8), n_parti
                 out["skipped"][f"{cell}@{frac}"] = f"capacity never reaches {c_eol:.2f} Ah in the data"
                 continue
             prior = fit_fade_prior([data[c] for c in cells if c != cell])
-            model = ExponentialFade(C_eol=c_eol, **prior)
+            model = ExponentialFade(C_eol=c_eol, regen_nu=regen_nu, **prior)
             dt = np.diff(np.concatenate([[cyc[0] - 1], cyc]))
             hist = track(model, cyc, cap, dt, 1.0, rul_step=1.0, max_steps=600, t_start=t_start,
                          unit=f"{cell}@{int(frac * 100)}%",
@@ -122,7 +124,7 @@ def run_battery(cells=("B0005", "B0006", "B0007"), eol_fracs=(0.7, 0.8), n_parti
             sel = np.asarray(hist.rul_t) < t_eol
             m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, t_eol,
                                 samples=hist.samples, t_p=t_start)
-            hist.meta.update({"t_eol": t_eol, "c_eol": c_eol, "prior": prior})
+            hist.meta.update({"t_eol": t_eol, "c_eol": c_eol, "prior": prior, "regen_nu": regen_nu})
             out["units"][f"{cell}@{frac}"] = {"history": hist, "metrics": m, "n_before_eol": int(sel.sum())}
             per.append(m)
         out["aggregate"][str(frac)] = M.aggregate(per)
