@@ -136,7 +136,7 @@ def node_bench(a) -> None:
     for k, mode in enumerate(("baseline", "onboard", "onboard_rt")):
         dom = a.domain_id + k
         ctx = ru.init_context(dom)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = ru.make_executor(ctx)
         lat: list[int] = []
         if mode == "baseline":
             node = Node("bench_counter", context=ctx)

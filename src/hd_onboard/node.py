@@ -133,12 +133,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             if self.p["rt_thread"]:
                 # joint states alone in a wait set (a few entities instead of all the node's): the executor's
                 # per-wake cost, not the core, dominates the arrival -> flag latency at 1 kHz
-                from rclpy.executors import SingleThreadedExecutor
-
                 self._rt_node = Node(NODE_NAME + "_rt", context=context, start_parameter_services=False)
                 self.sub_js = self._rt_node.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js_locked,
                                                                 ru.qos("sensor"), raw=True)
-                self._rt_exec = SingleThreadedExecutor(context=context)
+                self._rt_exec = ru.make_executor(context)
                 self._rt_exec.add_node(self._rt_node)
                 self._rt_stop = threading.Event()
                 self._rt = threading.Thread(target=self._rt_spin, name="onboard-joint-states", daemon=True)

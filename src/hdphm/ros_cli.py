@@ -5,7 +5,7 @@
   (a standard ROS 2 params file) and then from ``--ros-args``, parsed by
   rclpy itself.
 * ``hdphm stack`` runs all four nodes **in one process** on one
-  SingleThreadedExecutor: Python nodes of this size share one core well,
+  executor (``rosutil.make_executor``: rclpy's EventsExecutor, else a SingleThreadedExecutor): Python nodes of this size share one core well,
   the latched twin state is delivered without discovery latency, and one
   process is simpler to supervise on an actuator computer. For isolation
   (a crashing ground analysis must not stop the onboard monitor) run
@@ -595,7 +595,7 @@ class Stack:
 
         self.ctx = ru.init_context(domain_id, args)
         self.param_services = bool(param_services)
-        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex = ru.make_executor(self.ctx)
         self.nodes: dict[str, Any] = {}
         overrides = overrides or {}
         for name in nodes:
@@ -774,7 +774,7 @@ def cmd_node(args) -> int:
     _pop_domain(args)
     ctx = ru.init_context(args.domain_id, ros_args_for(args.name, args.ros_args))
     node = make_node(args.name, ctx)
-    ex = SingleThreadedExecutor(context=ctx)
+    ex = ru.make_executor(ctx)
     ex.add_node(node)
     try:
         ex.spin()
@@ -856,7 +856,7 @@ def cmd_record(args) -> int:
     except ValueError as e:
         print(f"hdphm record: {e}", file=sys.stderr)
         return 2
-    ex = SingleThreadedExecutor(context=ctx)
+    ex = ru.make_executor(ctx)
     ex.add_node(node)
     stop = {"v": False}
 
