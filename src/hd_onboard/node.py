@@ -144,7 +144,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 self.sub_js = self.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js, ru.qos("sensor"), raw=True)
             self.sub_cmd = self.create_subscription(JointState, ru.TOPIC_COMMAND, self._on_cmd, ru.qos("sensor"), raw=True)
             self.sub_tmp = self.create_subscription(Temperature, ru.TOPIC_TEMPERATURE, self._on_temp, ru.qos("sensor"), raw=True)
-            self.sub_mission = self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.qos("latched"))
+            self.sub_mission = self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.mission_sub_qos())
             self._t_start = time.monotonic()
             self.create_subscription(String, ru.TOPIC_TWIN_STATE, self._on_twin, ru.qos("latched"))
             self.create_timer(max(0.1, self.p["stale_timeout_s"] / 4), self._on_timer)

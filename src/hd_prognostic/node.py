@@ -161,7 +161,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.pub = self.create_publisher(Float64MultiArray, ru.TOPIC_HEALTH, ru.topic_qos(ru.TOPIC_HEALTH))
             self.pub_diag = self.create_publisher(DiagnosticArray, ru.TOPIC_DIAGNOSTICS, ru.qos("diagnostics"))
             self.create_subscription(Float64MultiArray, ru.TOPIC_FEATURES, self._on_features, ru.topic_qos(ru.TOPIC_FEATURES))
-            self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.qos("latched"))
+            self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.mission_sub_qos())
             self.create_timer(float(self.p["publish_period_s"]), self._on_timer)
             self._dirty = False
 

@@ -355,7 +355,7 @@ class Recorder:
         except ValueError as e:
             self.node.get_logger().warning(f"record: skipping {topic}: {e}")
             return
-        q = ru.topic_qos(topic)
+        q = ru.mission_sub_qos() if topic == ru.TOPIC_MISSION else ru.topic_qos(topic)
         if pub_qos:
             if any(p.reliability == ReliabilityPolicy.BEST_EFFORT for p in pub_qos):
                 q.reliability = ReliabilityPolicy.BEST_EFFORT

@@ -106,6 +106,14 @@ def qos(kind: str):
     raise ValueError(f"unknown QoS class {kind!r}; one of sensor, stream, latched, diagnostics")
 
 
+def mission_sub_qos():
+    """Subscription QoS of ``/hd/mission``: latched (compatible with the publisher's keep-last 1) but
+    keep-last 16, so missions announced faster than a busy subscriber takes them are all delivered."""
+    q = qos("latched")
+    q.depth = 16
+    return q
+
+
 def topic_qos(topic: str):
     """QoS profile of a stack topic (unknown topics get ``stream``)."""
     return qos(STACK_TOPICS.get(topic, ("", "stream"))[1])
