@@ -68,8 +68,10 @@ def test_life_through_stack_onnx_twin_obs_model_split_recording(fleet, tmp_path,
     assert len(hist) == len(fleet["life"])  # one committed filter step per mission
     assert [h["mission_index"] for h in hist] == list(range(len(fleet["life"])))
     for h in hist:
-        assert np.isfinite([h["rul_p5"], h["rul_p50"], h["rul_p95"], h["h_mean"], h["risk"]]).all(), h
-        assert h["rul_p5"] <= h["rul_p50"] <= h["rul_p95"]
+        # P95 may be +inf: more than the node's max_missions horizon (2000) without failing, which a
+        # prior fitted on 4 short missions per unit (little wear) can give; P5/P50 must be finite
+        assert np.isfinite([h["rul_p5"], h["rul_p50"], h["h_mean"], h["h_p5"], h["h_p95"], h["risk"]]).all(), h
+        assert not np.isnan(h["rul_p95"]) and 0 <= h["rul_p5"] <= h["rul_p50"] <= h["rul_p95"], h
     files = s["recorded_files"]
     assert [os.path.basename(f) for f in files] == [f"{act}_m{k:04d}.mcap" for k in range(len(fleet["life"]))]
     for f, src in zip(files, fleet["life"]):
