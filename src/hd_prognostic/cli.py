@@ -106,12 +106,14 @@ def _metrics(args) -> int:
 
 def _eval(args) -> int:
     from hd_prognostic.evaluate import fleet_eval, load_fleet
+    from hd_prognostic.hd import JOINT
 
     out = Path(args.out)
     fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache", workers=args.workers)
     s = fleet_eval(fleet, out, folds=args.folds, n_particles=args.particles, seed=args.seed, feature=args.feature,
                    degree=args.degree, likelihood=args.likelihood, with_ukf=not args.no_ukf,
-                   fuse=args.fuse.split(",") if args.fuse else None)
+                   fuse=args.fuse.split(",") if args.fuse else None,
+                   **(JOINT if args.joint else {"baseline": args.baseline}))
     ag = s["aggregate"]
     print("PF aggregate:", json.dumps(ag, indent=1, default=float))
     if s["ukf_aggregate"]:
@@ -138,11 +140,12 @@ def _features(args) -> int:
 
 def _fit_obs(args) -> int:
     from hd_prognostic.evaluate import load_fleet
-    from hd_prognostic.hd import fit_population
+    from hd_prognostic.hd import JOINT, fit_population
 
     fleet = load_fleet(args.fleet_dir, cache_dir=args.cache, workers=args.workers)
+    kw = {k: v for k, v in JOINT.items() if k != "pf_options"} if args.joint else {"baseline": args.baseline}
     obs = fit_population(fleet, feature=args.feature, degree=args.degree,
-                         fuse=args.fuse.split(",") if args.fuse else None)
+                         fuse=args.fuse.split(",") if args.fuse else None, **kw)
     obs.to_json(args.out)
     print(json.dumps({"fit_info": obs.fit_info, "degradation": obs.degradation}, indent=1))
     print(f"wrote {args.out}")
@@ -251,6 +254,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fuse", default=None, metavar="F1,F2,...",
                    help="fuse these features into one health index (wear regression on the training actuators)")
     p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
+    p.add_argument("--baseline", choices=("subtract", "ratio", "none", "state"), default="subtract",
+                   help="per-unit feature offset: median of the first missions subtracted (default) or "
+                        "estimated jointly with the wear (state)")
+    p.add_argument("--joint", action="store_true",
+                   help="joint estimator: offset state, Liu-West kernel, h = kappa U, predictive kappa prior "
+                        "(better wear tracking; RUL accuracy not better, see the README)")
     p.set_defaults(func=_guard(_eval))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")
@@ -263,6 +272,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--feature", default="HF_MTW_IF")
     p.add_argument("--degree", type=int, default=2)
     p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
+    p.add_argument("--baseline", choices=("subtract", "ratio", "none", "state"), default="subtract",
+                   help="per-unit feature offset: median of the first missions subtracted (default) or "
+                        "estimated jointly with the wear (state)")
+    p.add_argument("--joint", action="store_true",
+                   help="joint estimator: offset state, Liu-West kernel, h = kappa U, predictive kappa prior "
+                        "(better wear tracking; RUL accuracy not better, see the README)")
     p.add_argument("--cache", default="runs/prognostic_cache", help="per-actuator feature cache folder")
     p.add_argument("--fuse", default=None, metavar="F1,F2,...",
                    help="fuse these features into one health index (wear regression on the training actuators)")

@@ -225,7 +225,8 @@ def ukf_history(a: ActuatorData, obs: ObservationModel, n_samples: int = 2000, s
 def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particles: int = 2000, seed: int = 0,
                feature: str = "HF_MTW_IF", degree: int = 2, baseline: str = "subtract",
                likelihood: str = "student_t", with_ukf: bool = True, alpha: float = 0.2, progress: bool = True,
-               fuse: list[str] | None = None) -> dict:
+               fuse: list[str] | None = None, kappa_lifetime: bool = False, predictive_prior: bool = False,
+               pf_options: dict | None = None) -> dict:
     """k-fold held-out evaluation over actuators; writes per-actuator and aggregate metrics, figures."""
     from hd_prognostic.plots import save_alpha_lambda_grid, save_snapshot, save_state_history
 
@@ -240,7 +241,8 @@ def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particle
         test = [a for a in fleet if fold_of[a.actuator_id] == fi]
         if not test:
             continue
-        obs = fit_population(train, feature=feature, degree=degree, baseline=baseline, fuse=fuse)
+        obs = fit_population(train, feature=feature, degree=degree, baseline=baseline, fuse=fuse,
+                             kappa_lifetime=kappa_lifetime, predictive_prior=predictive_prior)
         obs.to_json(out / f"obs_model_fold{fi}.json")
         for a in test:
             eol = a.eol_mission()
@@ -250,7 +252,7 @@ def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particle
                 n = int(eol - a.mission_index[0])
                 snaps = (max(1, n // 2), max(1, int(0.85 * n)))
             hist = prognose(a, obs, n_particles=n_particles, seed=seed, likelihood=likelihood,
-                            snapshots=snaps)
+                            snapshots=snaps, pf_options=pf_options)
             dt = time.perf_counter() - t0
             (out / f"rul_{a.actuator_id}.json").write_text(json.dumps(hist.to_json()))
             if not np.isfinite(eol):
@@ -297,7 +299,8 @@ def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particle
                "ukf_per_actuator": per_ukf, "ukf_aggregate": M.aggregate(per_ukf) if per_ukf else {},
                "settings": {"folds": folds, "n_particles": n_particles, "seed": seed, "feature": feature,
                             "degree": degree, "baseline": baseline, "likelihood": likelihood, "alpha": alpha,
-                            "fuse": fuse}}
+                            "fuse": fuse, "kappa_lifetime": kappa_lifetime, "predictive_prior": predictive_prior,
+                            "pf_options": pf_options}}
     (out / "eval_summary.json").write_text(json.dumps(summary, indent=2, default=float))
     if rows:
         keys = list(rows[0].keys())

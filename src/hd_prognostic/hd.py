@@ -181,7 +181,8 @@ def _feature_dict(a: ActuatorData) -> dict[str, np.ndarray]:
 
 def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree: int = 2,
                    baseline: str = "subtract", n_baseline: int = 3,
-                   fuse: list[str] | None = None) -> ObservationModel:
+                   fuse: list[str] | None = None, kappa_lifetime: bool = False,
+                   predictive_prior: bool = False) -> ObservationModel:
     """Observation model and Archard prior from training actuators (which carry wear truth).
 
     * obs: pooled (h_true, normalised feature) pairs, heteroscedastic fit.
@@ -242,10 +243,14 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
         "W_median": float(np.median(np.concatenate(Ws))) if Ws else float("nan"),
         # random-walk std of ln kappa per mission: block-to-block drift of the training units, floored so a
         # unit whose wear law drifts (lubrication, other effects) can still be followed
-        "sigma_log_kappa": float(np.clip(np.sqrt(np.mean(np.concatenate(drift) ** 2) / (2 * _DRIFT_BLOCK))
+        "sigma_log_kappa_fit": float(np.clip(np.sqrt(np.mean(np.concatenate(drift) ** 2) / (2 * _DRIFT_BLOCK))
                                          if drift else 0.02, _SIGMA_LK_FLOOR, 0.1)),
         "n_train": len(train),
+        "kappa_lifetime": bool(kappa_lifetime),
+        # the fitted drift is used with kappa_lifetime; the first version's 0.02 otherwise
+        "predictive_prior": bool(predictive_prior),
     }
+    obs.degradation["sigma_log_kappa"] = (obs.degradation["sigma_log_kappa_fit"] if kappa_lifetime else 0.02)
     return obs
 
 
@@ -267,7 +272,11 @@ def build_model(obs: ObservationModel, h_fail: float | None = None, sigma_log_ka
     if off and not obs.offset_std > 0:
         raise ValueError("observation model with baseline 'state' has no offset prior (offset_std must be > 0; "
                          "fit it with fit_population)")
-    return ArchardWear(h_fail=hf, log_kappa_mean=deg["log_kappa_mean"], log_kappa_std=deg["log_kappa_std"],
+    n_tr = int(deg.get("n_train", 0))
+    t_prior = bool(deg.get("predictive_prior", False)) and n_tr >= 3
+    lk_std = deg["log_kappa_std"] * (np.sqrt(1.0 + 1.0 / n_tr) if t_prior else 1.0)
+    return ArchardWear(h_fail=hf, log_kappa_mean=deg["log_kappa_mean"], log_kappa_std=lk_std,
+                       log_kappa_df=float(n_tr - 1) if t_prior else float("inf"),
                        h0_mean=deg["h0_mean"], h0_std=deg["h0_std"], sigma_proc=deg["sigma_proc"],
                        sigma_log_kappa=sigma_log_kappa, observe_fn=obs,
                        h_fail_std=float(deg.get("h_fail_std", 0.0)) if h_fail is None else 0.0,
@@ -300,7 +309,10 @@ def mission_sequence(a: ActuatorData, obs: ObservationModel) -> tuple[np.ndarray
     return full.astype(float), y, expo
 
 
-PF_DEFAULTS = dict(likelihood="student_t", roughening=0.05, kernel="liu_west", discount=0.98)
+PF_DEFAULTS = dict(likelihood="student_t", roughening=0.05, kernel="gordon", discount=0.98)
+#: the joint estimator (offset state, Liu-West kernel, h = kappa U, predictive prior): better wear
+#: tracking, RUL accuracy not better (README "Joint offset estimator")
+JOINT = dict(baseline="state", kappa_lifetime=True, predictive_prior=True, pf_options={"kernel": "liu_west"})
 
 
 def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000, seed: int = 0,
@@ -321,7 +333,9 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
 
     hist = track(model, t, y, expo, future, rul_step=1.0, max_steps=max_missions,
                  t_start=t[0] if t_start is None else t_start, unit=a.actuator_id,
-                 pf_kwargs={**PF_DEFAULTS, "likelihood": likelihood, **(pf_options or {}),
+                 pf_kwargs={**PF_DEFAULTS, "likelihood": likelihood,
+                            **({"kernel": "liu_west"} if obs.degradation.get("kappa_lifetime") else {}),
+                            **(pf_options or {}),
                             "n_particles": n_particles, "seed": seed},
                  progress=progress, rul_particles=rul_particles, snapshots=snapshots)
     hours = a.operating_hours

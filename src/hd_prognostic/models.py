@@ -152,6 +152,9 @@ class ArchardWear(DegradationModel):
     #: coefficient this keeps (h, kappa) consistent: a particle whose kappa is corrected is not left
     #: with the wear that the wrong kappa accumulated (which the feature offset would then absorb).
     kappa_lifetime: bool = False
+    #: degrees of freedom of the ln kappa prior (inf: normal). A prior fitted on n units is the Student-t
+    #: predictive with n - 1 dof and scale std * sqrt(1 + 1/n) (set by ``hd.build_model``).
+    log_kappa_df: float = float("inf")
 
     state_names = ("h", "log_kappa")
     health_index = 0
@@ -250,7 +253,12 @@ class ArchardWear(DegradationModel):
 
     def sample_prior(self, n, rng):
         h0 = np.abs(self.h0_mean + self.h0_std * rng.standard_normal(n))
-        lk = self.log_kappa_mean + self.log_kappa_std * rng.standard_normal(n)
+        if np.isfinite(self.log_kappa_df):
+            # posterior-predictive of an unseen unit from a few training units: Student-t tails reach
+            # wear coefficients outside the (small-sample) training spread
+            lk = self.log_kappa_mean + self.log_kappa_std * rng.standard_t(self.log_kappa_df, n)
+        else:
+            lk = self.log_kappa_mean + self.log_kappa_std * rng.standard_normal(n)
         if not self.has_offset:
             return np.column_stack([h0, lk])
         if self.offset_mode == "state":

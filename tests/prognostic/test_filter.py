@@ -185,3 +185,43 @@ def test_other_models_run_in_the_same_filter():
     # exact integration is step-size independent
     x3 = paris.propagate(paris.propagate(x, 500.0, None), 500.0, None)
     assert np.allclose(x2[:, 0], x3[:, 0], rtol=1e-10)
+
+
+def test_offset_state_learns_unit_offset_and_wear():
+    """A unit whose feature offset is 2 prior-sigmas from the population: the Rao-Blackwellised offset
+    converges to it and the wear is tracked without the bias a fixed baseline would leave."""
+    from hd_prognostic.models import ArchardWear
+
+    obs = ObservationModel(coef=[0.0, 3e-5, 0.5e-5], s0=1.5e-6, s1=1e-6, h_ref=1e-5, baseline="state",
+                           offset_mean=1e-5, offset_std=2e-6)
+    model = ArchardWear(h_fail=30e-6, log_kappa_mean=np.log(1e-12), log_kappa_std=0.3, sigma_proc=0.05, h0_std=1e-8,
+                        sigma_log_kappa=0.003, observe_fn=obs, offset_mean=obs.offset_mean,
+                        offset_std=obs.offset_std, kappa_lifetime=True)
+    assert model.state_names == ("h", "log_kappa", "b", "P_b") and model.n_marginalised == 2
+    rng = np.random.default_rng(3)
+    b_true, W, n = 1.4e-5, 1e5, 150
+    h = np.cumsum(np.r_[0.0, np.full(n, 1.1e-12 * W)])
+    z = b_true + obs.mean(h) + obs.std(h) * rng.standard_normal(len(h))
+    pf = ParticleFilter(model, 2000, seed=1, likelihood="student_t", kernel="liu_west")
+    for k in range(1, len(h)):
+        pf.step(W, z[k])
+    m = pf.mean()
+    assert abs(m[2] - b_true) < 1.5e-6  # offset learned (prior mean was 2 sigma away)
+    assert abs(m[0] - h[-1]) < 1.5e-6  # wear within 1.5 um at ~16 um
+    assert np.all(pf.x[:, 3] > 0) and np.all(pf.x[:, 3] < obs.offset_std**2)  # posterior variance shrank
+    # the UKF form of the same model: one plain static column
+    mu = ArchardWear(h_fail=30e-6, observe_fn=obs, offset_mean=1e-5, offset_std=2e-6, offset_mode="state")
+    assert mu.state_names == ("h", "log_kappa", "b")
+
+
+def test_regeneration_likelihood_is_asymmetric():
+    from hd_prognostic.models import ExponentialFade
+
+    m = ExponentialFade(C_eol=1.4, sigma_obs=0.01, regen_nu=1.0)
+    x = np.array([[1.80, -1e-3], [1.85, -1e-3]])
+    ll_up = m.log_likelihood(1.85 + 0.05, x[:1] * [1, 1] + [0.05, 0])  # +5 sigma above
+    ll_dn = m.log_likelihood(1.85 - 0.05, x[:1] * [1, 1] + [0.05, 0])  # -5 sigma below
+    assert ll_up[0] > ll_dn[0] + 5  # an upward (regeneration) jump is far less surprising
+    assert m.custom_likelihood and not ExponentialFade().custom_likelihood
+    with pytest.raises(ValueError):
+        ParticleFilter(m, 10, kernel="bogus")
