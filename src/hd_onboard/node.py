@@ -194,7 +194,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.meta = meta
             self.hardware_id = str(meta.get("actuator_id") or self.hardware_id or "unknown")
             self._new_core()
-            self.get_logger().info(f"mission {meta.get('mission_index')} of {self.hardware_id}: core reset")
+            self.get_logger().debug(f"mission {meta.get('mission_index')} of {self.hardware_id}: core reset")
 
         def _poll_mission(self):
             sub = self.sub_mission

@@ -47,26 +47,12 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .terms import CATALOG_NAMES
+
 #: Canonical effect names (PHYSICS.md section 7) plus the structural terms the
 #: three-body model itself is built of. Discovery may add names outside this
 #: tuple: they are kept and reported, and only ``extra_terms`` give them maths.
-CATALOG_EFFECTS = (
-    "coulomb_friction",
-    "viscous_friction",
-    "stribeck_friction",
-    "temperature_dependent_friction",
-    "load_dependent_friction",
-    "position_periodic_friction",
-    "position_periodic_torque",
-    "kinematic_error_harmonic",
-    "position_dependent_stiffness",
-    "nonlinear_stiffness",
-    "hysteresis",
-    "backlash",
-    "cogging_torque",
-    "current_ripple",
-    "motor_thermal_drift",
-)
+CATALOG_EFFECTS = CATALOG_NAMES
 STRUCTURAL_EFFECTS = ("inertia", "linear_stiffness", "structural_damping", "mesh_friction")
 #: Effects this module gives equations to (others are accepted as names only).
 IMPLEMENTED_EFFECTS = STRUCTURAL_EFFECTS + (

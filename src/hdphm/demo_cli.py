@@ -73,12 +73,25 @@ def _fit_obs(fleet: Path, train_ids: list[str], out_json: Path, args):
     return obs
 
 
-def _replay(bags: list[Path], model_dir: Path, obs_json: Path, out_mcap: Path) -> dict:
+def _replay(bags: list[Path], model_dir: Path, obs_json: Path, out_dir: Path) -> dict:
     from hdphm.ros_cli import run_stack_on_bags
 
-    _say(f"4/5 replaying {len(bags)} missions of the held-out actuator through the ROS 2 stack -> {out_mcap}")
-    return run_stack_on_bags([str(b) for b in bags], model_dir=str(model_dir), out_mcap=str(out_mcap), rate="max",
-                             overrides={"prognostic": {"obs_model": str(obs_json)}})
+    _say(f"4/5 replaying {len(bags)} missions of the held-out actuator through the ROS 2 stack, "
+         f"recording one MCAP per mission under {out_dir}")
+    return run_stack_on_bags([str(b) for b in bags], model_dir=str(model_dir), out_mcap=str(out_dir), rate="max",
+                             obs_model=str(obs_json), split_per_mission=True)
+
+
+def _score_node(summary: dict, aid: str, eol: int | None) -> dict:
+    """Score the prognostic node's own per-mission RUL (what the stack published) against truth."""
+    from hd_prognostic import metrics as M
+
+    rows = [r for r in (summary.get("health_history") or {}).get(aid, []) if "rul_p50" in r]
+    if not rows or eol is None:
+        return {}
+    t = [float(r["mission_index"]) for r in rows]
+    return M.score_history(t, [r["rul_p50"] for r in rows], [r["rul_p5"] for r in rows],
+                           [r["rul_p95"] for r in rows], float(eol), alpha=0.2)
 
 
 def _score(fleet: Path, aid: str, obs_json: Path, out: Path, truth: dict, args) -> dict:
@@ -117,13 +130,15 @@ def run_demo(args) -> int:
     obs_json = out / "obs_model.json"
     _fit_obs(fleet, train_ids, obs_json, args)
     bags = _bags_of(fleet, test_id)
-    summary = _replay(bags, out / "twin", obs_json, out / f"stack_{test_id}.mcap")
+    summary = _replay(bags, out / "twin", obs_json, out / f"stack_{test_id}")
     _say("5/5 scoring the RUL of the held-out actuator against the simulator's truth (evaluation only)")
     score = _score(fleet, test_id, obs_json, out, truth, args)
+    score["node"] = _score_node(summary, test_id, score.get("eol_mission"))
 
     report = {"held_out_actuator": test_id, "training_actuators": train_ids, "twin": twin_metrics.get("validation"),
               "stack": {k: summary.get(k) for k in ("n_warn", "n_error", "speedup", "wall_s", "twin", "health",
                                                      "recorded", "out_mcap", "errors")},
+              "recorded_files": len(summary.get("recorded_files") or []),
               "rul_score": score, "wall_s": time.perf_counter() - t_start}
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
     _print_report(report, summary)
@@ -154,12 +169,23 @@ def _print_report(rep: dict, summary: dict) -> None:
         last = sc["last"]
         print(f"RUL (batch, same core as the node): at mission {last['t']:.0f} P50 {last['p50']:.1f} missions "
               f"[P5 {last['p5']:.1f}, P95 {last['p95']:.1f}]; true end of life at mission {sc['eol_mission']}")
-        keys = [k for k in ("alpha_lambda", "fraction_in_cone", "coverage_p5_p95", "cra", "prognostic_horizon") if k in sc]
-        for k in keys:
-            print(f"  {k}: {sc[k]}")
+        for label, d in (("batch", sc), ("node", sc.get("node") or {})):
+            keys = [k for k in ("alpha_lambda", "fraction_in_cone", "coverage_p5_p95", "cra", "prognostic_horizon")
+                    if k in d]
+            if keys:
+                print(f"  {label}: " + "; ".join(f"{k} {_fmt(d[k])}" for k in keys))
     else:
         print(f"RUL: {sc.get('note')}")
-    print(f"recording: {st.get('out_mcap')}; report: report.json; {rep['wall_s']:.0f} s in all")
+    print(f"recording: {rep['recorded_files']} per-mission MCAP files in {st.get('out_mcap')} "
+          f"(each passes 'hdphm validate'); report: report.json; {rep['wall_s']:.0f} s in all")
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k}: {_fmt(x)}" for k, x in v.items()) + "}"
+    return str(v)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -170,7 +196,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=4.0, help="inspection mission length, s")
     p.add_argument("--mission-hours", type=float, default=400.0,
                    help="operating hours one mission stands for (wear acceleration; larger = shorter lives)")
-    p.add_argument("--twin-bags-per-actuator", type=int, default=12, help="missions per training actuator for the twin")
+    p.add_argument("--twin-bags-per-actuator", type=int, default=24, help="missions per training actuator for the twin")
     p.add_argument("--epochs", type=int, default=None, help="twin epochs (default: the small preset's)")
     p.add_argument("--workers", type=int, default=2, help="simulation worker processes")
     p.add_argument("--seed", type=int, default=0)
