@@ -5,7 +5,8 @@
   (a standard ROS 2 params file) and then from ``--ros-args``, parsed by
   rclpy itself.
 * ``hdphm stack`` runs all four nodes **in one process** on one
-  executor (``rosutil.make_executor``: rclpy's EventsExecutor, else a SingleThreadedExecutor): Python nodes of this size share one core well,
+  executor (``rosutil.make_executor``: a SingleThreadedExecutor; rclpy's EventsExecutor with
+  ``HDPHM_EXECUTOR=events``): Python nodes of this size share one core well,
   the latched twin state is delivered without discovery latency, and one
   process is simpler to supervise on an actuator computer. For isolation
   (a crashing ground analysis must not stop the onboard monitor) run
