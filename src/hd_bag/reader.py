@@ -121,11 +121,18 @@ class _Raw:
     checked_channels: set[int] = field(default_factory=set)
 
 
-def _decode_js(block: MessageBlock, sel: np.ndarray, first_index: int, acc: _JSAcc, schema) -> int:
-    """Decode the JointState messages ``sel`` of a block into ``acc``; returns the generic-path count."""
+def _layout_groups(block: MessageBlock, sel: np.ndarray, first_index: int, match_layout, schema):
+    """Split messages ``sel`` of a block into same-layout groups for the vectorised decoder.
+
+    Messages are grouped by length; within a length, ``match_layout(rows, i0)``
+    parses the layout of row ``i0`` and returns ``(layout, mask)`` of the rows
+    that share it (or ``None`` when the row is not of a fixed layout). Yields
+    ``("fast", rows, message_index, layout)`` per group, at most
+    ``_MAX_LAYOUTS`` per length, then ``("generic", msg, message_index, None)``
+    for every message left, decoded by the generic ROS 2 decoder.
+    """
     idx_all = first_index + np.arange(len(sel))
     lens = block.length[sel]
-    n_generic = 0
     for L in np.unique(lens):
         m_L = lens == L
         sub = sel[m_L]
@@ -136,74 +143,79 @@ def _decode_js(block: MessageBlock, sel: np.ndarray, first_index: int, acc: _JSA
             if not left.any():
                 break
             i0 = int(np.argmax(left))
-            lay = cdr.parse_jointstate_layout(rows[i0].tobytes())
-            if lay is None:
+            found = match_layout(rows, i0, left, int(L))
+            if found is None:
                 break
-            m = left.copy()
-            m[left] = cdr.match_layout(rows[left], lay)
+            lay, m = found
             if not m[i0]:
                 break
-            r = rows[m]
+            yield "fast", rows[m], sub_idx[m], lay
+            left &= ~m
+        if left.any():
+            dec = cdr.generic_decoder(schema.name, schema.data)
+            for data, ii in zip(payloads(block, sub[left]), sub_idx[left].tolist()):
+                yield "generic", dec(data), np.array([ii]), None
+
+
+def _stamp_ns(msg) -> np.ndarray:
+    st = msg.header.stamp
+    return np.array([int(st.sec) * 1_000_000_000 + int(st.nanosec)], np.int64)
+
+
+def _match_js(rows: np.ndarray, i0: int, left: np.ndarray, L: int):
+    lay = cdr.parse_jointstate_layout(rows[i0].tobytes())
+    if lay is None:
+        return None
+    m = left.copy()
+    m[left] = cdr.match_layout(rows[left], lay)
+    return lay, m
+
+
+def _match_temp(rows: np.ndarray, i0: int, left: np.ndarray, L: int):
+    frame = cdr.parse_temperature_frame(rows[i0].tobytes())
+    if frame is None:
+        return None
+    tmpl, mask, off = cdr.temperature_layout(frame)
+    if off + 16 > L:
+        return None
+    m = left.copy()
+    m[left] = np.all(rows[left][:, :len(tmpl)][:, mask] == tmpl[mask], axis=1)
+    return (frame, off), m
+
+
+def _decode_js(block: MessageBlock, sel: np.ndarray, first_index: int, acc: _JSAcc, schema) -> int:
+    """Decode the JointState messages ``sel`` of a block into ``acc``; returns the generic-path count."""
+    n_generic = 0
+    for kind, r, idx, lay in _layout_groups(block, sel, first_index, _match_js, schema):
+        acc.index.append(idx)
+        if kind == "fast":
             acc.stamps.append(cdr.decode_stamps(r))
-            acc.index.append(sub_idx[m])
             acc.names.append(lay.names)
             acc.pos.append(cdr.decode_doubles(r, lay.offsets[0], lay.counts[0]))
             acc.vel.append(cdr.decode_doubles(r, lay.offsets[1], lay.counts[1]))
             acc.eff.append(cdr.decode_doubles(r, lay.offsets[2], lay.counts[2]))
-            left &= ~m
-        if left.any():
-            dec = cdr.generic_decoder(schema.name, schema.data)
-            for data, ii in zip(payloads(block, sub[left]), sub_idx[left].tolist()):
-                msg = dec(data)
-                st = msg.header.stamp
-                acc.stamps.append(np.array([int(st.sec) * 1_000_000_000 + int(st.nanosec)], np.int64))
-                acc.index.append(np.array([ii]))
-                acc.names.append(tuple(msg.name))
-                acc.pos.append(np.asarray(msg.position, np.float64)[None, :])
-                acc.vel.append(np.asarray(msg.velocity, np.float64)[None, :])
-                acc.eff.append(np.asarray(msg.effort, np.float64)[None, :])
-                n_generic += 1
+        else:
+            acc.stamps.append(_stamp_ns(r))
+            acc.names.append(tuple(r.name))
+            acc.pos.append(np.asarray(r.position, np.float64)[None, :])
+            acc.vel.append(np.asarray(r.velocity, np.float64)[None, :])
+            acc.eff.append(np.asarray(r.effort, np.float64)[None, :])
+            n_generic += 1
     return n_generic
 
 
 def _decode_temp(block: MessageBlock, sel: np.ndarray, first_index: int, acc: _TempAcc, schema) -> None:
-    idx_all = first_index + np.arange(len(sel))
-    lens = block.length[sel]
-    for L in np.unique(lens):
-        m_L = lens == L
-        sub = sel[m_L]
-        sub_idx = idx_all[m_L]
-        rows = gather_rows(block, sub, int(L))
-        left = np.ones(len(sub), bool)
-        for _ in range(_MAX_LAYOUTS):
-            if not left.any():
-                break
-            i0 = int(np.argmax(left))
-            frame = cdr.parse_temperature_frame(rows[i0].tobytes())
-            if frame is None:
-                break
-            tmpl, mask, off = cdr.temperature_layout(frame)
-            if off + 16 > L:
-                break
-            m = left.copy()
-            m[left] = np.all(rows[left][:, :len(tmpl)][:, mask] == tmpl[mask], axis=1)
-            if not m[i0]:
-                break
-            r = rows[m]
+    for kind, r, idx, lay in _layout_groups(block, sel, first_index, _match_temp, schema):
+        acc.index.append(idx)
+        if kind == "fast":
+            frame, off = lay
             acc.stamps.append(cdr.decode_stamps(r))
-            acc.index.append(sub_idx[m])
             acc.value.append(cdr.decode_doubles(r, off, 1)[:, 0].copy())
             acc.frame.append(frame)
-            left &= ~m
-        if left.any():
-            dec = cdr.generic_decoder(schema.name, schema.data)
-            for data, ii in zip(payloads(block, sub[left]), sub_idx[left].tolist()):
-                msg = dec(data)
-                st = msg.header.stamp
-                acc.stamps.append(np.array([int(st.sec) * 1_000_000_000 + int(st.nanosec)], np.int64))
-                acc.index.append(np.array([ii]))
-                acc.value.append(np.array([float(msg.temperature)]))
-                acc.frame.append(str(msg.header.frame_id))
+        else:
+            acc.stamps.append(_stamp_ns(r))
+            acc.value.append(np.array([float(r.temperature)]))
+            acc.frame.append(str(r.header.frame_id))
 
 
 def _scan(path: str, include_sim: bool) -> _Raw:
