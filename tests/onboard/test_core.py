@@ -1,11 +1,8 @@
 """Onboard core: detector arithmetic, conditioning and end-to-end flags on synthetic missions."""
-import os
-import sys
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, os.path.dirname(__file__))
 from tests.onboard.synth import make_mission  # noqa: E402
 
 from hd_onboard.core import OnboardConfig, OnboardCore, run_mission, RESIDUAL_COLUMNS  # noqa: E402

@@ -1,13 +1,10 @@
 """Onboard core on the real plant simulator (hd_sim), the per-sample short path, deferred windows, eval."""
 import json
-import os
-import sys
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, os.path.dirname(__file__))
-from simfix import faulted_mission, sim_mission  # noqa: E402
+from tests.onboard.simfix import faulted_mission, sim_mission
 
 from hd_onboard.core import OnboardCore, run_mission, window_row  # noqa: E402
 from hd_onboard.detector import ERROR, OK, WARN  # noqa: E402

@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("rclpy")
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "onboard"))
-from simfix import faulted_mission, sim_mission  # noqa: E402
+from tests.onboard.simfix import faulted_mission, sim_mission
 
 from hd_bag import read_mission, validate_bag, write_mission  # noqa: E402
 from hdphm import rosutil as ru  # noqa: E402
@@ -194,7 +193,7 @@ def test_record_split_per_mission_across_processes(tmp_path, domain_id):
 
 def test_onboard_rt_thread_mode(tmp_path, domain_id):
     """rt_thread: joint states on their own executor thread; every sample processed, fault flagged."""
-    from synth import make_mission
+    from tests.onboard.synth import make_mission
 
     from hdphm.ros_cli import Replayer
 

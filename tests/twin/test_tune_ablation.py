@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from synth import synth_fleet, synth_mission
+from tests.twin.synth import synth_fleet, synth_mission
 
 
 def test_tune_is_resumable_sqlite(tmp_path, monkeypatch):
