@@ -28,19 +28,27 @@ def _mission(args) -> int:
     from hd_bag import write_mission
 
     from .params import nominal, sample_population
-    from .plant import simulate_mission
+    from .plant import parse_fault, simulate_mission
 
+    try:
+        fault = parse_fault(args.fault) if args.fault else None
+    except ValueError as e:
+        raise SystemExit(f"--fault: {e}") from None
     effects = _effects_from_args(args)
     params = nominal() if args.actuator is None else sample_population(args.actuator + 1, args.pop_seed)[-1]
     wear = args.wear * 1e-6
     health = {"h_plus": wear * (1 + args.wear_asym), "h_minus": wear * (1 - args.wear_asym)}
     m, truth = simulate_mission(params, effects, args.profile, args.seed, duration=args.duration, fs=args.fs,
                                 health=health, mission_index=args.mission_index, n_sub=args.n_sub,
-                                T_amb=args.t_amb)
+                                T_amb=args.t_amb, fault=fault)
     write_mission(args.out, m, sim=None if args.no_sim else truth)
     print(f"wrote {args.out}: {m.n} samples, {m.duration:.2f} s, actuator {m.meta.actuator_id}, "
           f"profile {args.profile}, h = {truth['health']['h'] * 1e6:.2f} um, effects on: "
           + ",".join(k for k, v in effects.on.items() if v))
+    if fault:
+        fr = truth["effects"]["fault"]
+        print(f"fault {fr['name']} {fr['before']:g} -> {fr['after']:g} from t = {fr['t_onset']:.4f} s "
+              f"(ramp {fr['t_ramp'] * 1e3:.1f} ms): friction x{fr['friction_factor']:.3g}, k_FS x{fr['k_FS_factor']:.3g}")
     return 0
 
 
@@ -95,6 +103,10 @@ def register(subparsers) -> None:
     pm.add_argument("--wear-asym", type=float, default=0.0, help="(h+ - h-)/(h+ + h-), in [-1, 1]")
     pm.add_argument("--mission-index", type=int, default=0)
     pm.add_argument("--t-amb", type=float, default=None, help="ambient temperature, degC (default: random)")
+    pm.add_argument("--fault", default=None, metavar="NAME:SEVERITY@T_ONSET[/T_RAMP]",
+                    help="fault starting inside the mission (s from its start; ramp default 0.05 s): "
+                         "lubrication_loss (friction x (1 + severity)) or flexspline_stiffness_loss "
+                         "(k_FS x (1 - severity)), e.g. lubrication_loss:3@10")
     _add_effect_args(pm)
     pm.set_defaults(func=_mission)
 

@@ -41,6 +41,18 @@ Integration: semi-implicit (symplectic) Euler for the mechanics, a
 semi-implicit step for the R-L winding, explicit Euler for the Bouc-Wen and
 thermal states. Logged accelerations are the ones computed from the logged
 forces at the same instant, so r1..r4 hold to rounding on ``/sim/internal``.
+
+Mid-mission fault (``flt_*``, built by :func:`hd_sim.plant.fault_vector`):
+from internal step ``flt_n_on`` on (``< 0``: no fault) the fault fraction
+phi rises linearly from 1/flt_n_ramp to 1 over ``flt_n_ramp`` steps and
+
+    T_C, T_C_out, b_in, b_out, mu_c, mu_bb  x  1 + (flt_fric - 1) phi     (lubrication_loss)
+    k_FS                                    x  1 + (flt_kFS - 1) phi      (flexspline_stiffness_loss)
+
+(the Bouc-Wen parameters keep their start-of-mission values). Before the
+onset no parameter is touched, so the trajectory is bit-identical to the
+run without fault. Logged: ``fault_active`` (0/1, 1 from the onset) and
+``fault_phi`` (0..1).
 """
 
 from __future__ import annotations
@@ -76,6 +88,8 @@ KNAMES = (
     "Kp_i", "Ki_i", "Kp_w", "Ki_w", "Kp_p", "omega_max_f", "n_ctrl", "q_f", "input_locked",
     # thermal
     "C_w", "R_wh", "C_h", "R_ha", "heat_on",
+    # mid-mission fault (hd_sim.plant.fault_vector): onset step, ramp steps, final multipliers
+    "flt_n_on", "flt_n_ramp", "flt_fric", "flt_kFS",
     # numerics
     "dt", "n_sub",
 )
@@ -95,6 +109,7 @@ OUT_NAMES = (
     "x_FS_d", "y_FS_d", "z_h", "T_e", "T_cog", "T_pos", "T_ext", "T_tr", "k_m_eff",
     "v_d", "v_q", "i_q_ref", "omega_m_ref",
     "W_in", "W_ext", "W_pos", "W_diss", "W_plus", "W_minus",
+    "fault_active", "fault_phi",
 )
 OI = {n: i for i, n in enumerate(OUT_NAMES)}
 
@@ -182,6 +197,11 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
     locked = P[K_input_locked] > 0.5
     C_w = P[K_C_w]; R_wh = P[K_R_wh]; C_h = P[K_C_h]; R_ha = P[K_R_ha]; heat_on = P[K_heat_on]
     dt = P[K_dt]; n_sub = int(P[K_n_sub])
+    flt_n_on = P[K_flt_n_on]; flt_n_ramp = max(P[K_flt_n_ramp], 1.0)
+    flt_fric = P[K_flt_fric]; flt_kFS = P[K_flt_kFS]
+    T_C00 = T_C0; T_C_out00 = T_C_out0; b_in00 = b_in0; b_out00 = b_out0; mu_c0 = mu_c; mu_bb0 = mu_bb
+    k_FS0 = k_FS
+    phi = 0.0; f_on = 0.0
     J_out = J_CS + J_L
     eps_vf = eps_v / N
 
@@ -201,6 +221,14 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
     step = 0
     for k in range(n_log):
         for s in range(n_sub):
+            # ---- mid-mission fault: ramp the affected parameters (never before the onset) ---
+            if flt_n_on >= 0.0 and phi < 1.0 and step >= flt_n_on:
+                f_on = 1.0
+                phi = min(1.0, (step - flt_n_on + 1.0) / flt_n_ramp)
+                mf = 1.0 + (flt_fric - 1.0) * phi
+                T_C0 = T_C00 * mf; T_C_out0 = T_C_out00 * mf; b_in0 = b_in00 * mf; b_out0 = b_out00 * mf
+                mu_c = mu_c0 * mf; mu_bb = mu_bb0 * mf
+                k_FS = k_FS0 * (1.0 + (flt_kFS - 1.0) * phi)
             # ---- slow quantities at the control rate -------------------------------------
             if step % n_ctrl == 0:
                 if tdf_on > 0.5:
@@ -336,6 +364,7 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
                 o[O_v_d] = v_d; o[O_v_q] = v_q; o[O_i_q_ref] = i_q_ref; o[O_omega_m_ref] = w_m_ref
                 o[O_W_in] = W_in; o[O_W_ext] = W_ext; o[O_W_pos] = W_pos; o[O_W_diss] = W_diss
                 o[O_W_plus] = W_plus; o[O_W_minus] = W_minus
+                o[O_fault_active] = f_on; o[O_fault_phi] = phi
             # ---- power bookkeeping (energy balance, wear and heat) ---------------------------
             p_mesh_fric = mu_c * abs(F_my) * sgn_m * vx
             p_diss = (T_fin * w_m + T_fout * w_f + c_b * d_b_d * d_b_d + c_m * dg * d_m_d * d_m_d

@@ -213,6 +213,7 @@ def kernel_vector(d: Mapping[str, float], p: Mapping[str, Any], fs: float, n_sub
         Kp_p=w_p, omega_max_f=math.radians(p["rate_max_deg"]),
         n_ctrl=float(max(1, int(round(1.0 / (p["f_ctrl"] * dt))))), q_f=quant_f,
         input_locked=float(input_locked), dt=dt, n_sub=float(n_sub),
+        flt_n_on=-1.0, flt_n_ramp=1.0, flt_fric=1.0, flt_kFS=1.0,  # no fault (see fault_vector)
     )
     v = np.empty(len(K.KNAMES))
     for name, i in K.KI.items():
@@ -223,6 +224,76 @@ def kernel_vector(d: Mapping[str, float], p: Mapping[str, Any], fs: float, n_sub
         bad = [n for n, i in K.KI.items() if not np.isfinite(v[i])]
         raise ValueError(f"non-finite plant parameters: {bad}")
     return v
+
+
+#: Faults that can start inside a mission -> the severity's meaning and its admissible range.
+MID_MISSION_FAULTS = {
+    "lubrication_loss": ("severity: friction x (1 + severity) (T_C, T_C_out, b, b_out, mu_c, mu_bb)", 0.0, 10.0),
+    "flexspline_stiffness_loss": ("severity: fraction of k_FS lost, k_FS x (1 - severity)", 0.0, 0.95),
+}
+#: Default ramp of a mid-mission fault [s]: a short, not instantaneous, onset (grease squeezed out,
+#: a crack through the flexspline wall); 0 gives a step at the next internal step.
+FAULT_RAMP_S = 0.05
+
+
+def parse_fault(text: str) -> dict[str, Any]:
+    """``NAME:SEVERITY@T_ONSET[/T_RAMP]`` (s) -> fault dict for :func:`simulate_mission`."""
+    try:
+        name, rest = text.split(":", 1)
+        sev, rest = rest.split("@", 1)
+        t_on, _, ramp = rest.partition("/")
+        f = {"name": name.strip(), "severity": float(sev), "t_onset": float(t_on)}
+        if ramp:
+            f["t_ramp"] = float(ramp)
+    except ValueError:
+        raise ValueError(f"fault {text!r}: expected NAME:SEVERITY@T_ONSET[/T_RAMP], e.g. "
+                         f"lubrication_loss:3@10 or flexspline_stiffness_loss:0.3@8/0.1") from None
+    return f
+
+
+def fault_vector(fault: Mapping[str, Any], d: Mapping[str, float], duration: float,
+                 dt: float) -> tuple[dict[str, float], dict[str, Any]]:
+    """Kernel entries ``flt_*`` and the /sim/effects record of a mid-mission fault.
+
+    fault: ``{"name", "severity", "t_onset" [s from the first sample], "t_ramp" [s, default
+    FAULT_RAMP_S]}``; d: :func:`derived` of the mission (its ``lube_loss``/``fs_loss`` are the
+    state before the onset: the fault takes them to ``max(before, severity)``, per the effect's
+    law in :func:`derived`, and never heals). Raises ValueError naming the bad field.
+    """
+    if not isinstance(fault, Mapping):
+        raise ValueError(f"fault must be a dict {{name, severity, t_onset[, t_ramp]}}, got {type(fault).__name__}")
+    unknown = set(fault) - {"name", "severity", "t_onset", "t_ramp"}
+    if unknown:
+        raise ValueError(f"fault: unknown keys {sorted(unknown)}")
+    name = fault.get("name")
+    if name not in MID_MISSION_FAULTS:
+        raise ValueError(f"fault name {name!r}: mid-mission faults are {sorted(MID_MISSION_FAULTS)}")
+    _, lo, hi = MID_MISSION_FAULTS[name]
+    try:
+        sev = float(fault["severity"]); t_on = float(fault["t_onset"])
+        ramp = float(fault.get("t_ramp", FAULT_RAMP_S))
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"fault {name}: severity, t_onset (and t_ramp) must be numbers ({e!r})") from None
+    if not (math.isfinite(sev) and lo <= sev <= hi):
+        raise ValueError(f"fault {name}: severity {sev!r} outside [{lo}, {hi}]")
+    if not (math.isfinite(t_on) and 0.0 <= t_on < duration):
+        raise ValueError(f"fault {name}: t_onset {t_on!r} s outside the mission [0, {duration:g}) s")
+    if not (math.isfinite(ramp) and ramp >= 0.0):
+        raise ValueError(f"fault {name}: t_ramp {ramp!r} s must be finite and >= 0")
+    fric = kfs = 1.0
+    if name == "lubrication_loss":
+        before = float(d["lube_loss"]); after = max(before, sev)
+        fric = (1.0 + after) / (1.0 + before)
+    else:
+        before = float(d["fs_loss"]); after = max(before, sev)
+        kfs = (1.0 - after) / (1.0 - before)
+    n_on = float(round(t_on / dt))
+    n_ramp = float(max(1, int(round(ramp / dt))))
+    kv = {"flt_n_on": n_on, "flt_n_ramp": n_ramp, "flt_fric": fric, "flt_kFS": kfs}
+    rec = {"name": name, "severity": sev, "t_onset": n_on * dt, "t_ramp": n_ramp * dt,
+           "before": before, "after": after, "friction_factor": fric, "k_FS_factor": kfs,
+           "law": MID_MISSION_FAULTS[name][0]}
+    return kv, rec
 
 
 def _mesh_inverse(F: float, P: np.ndarray) -> float:
@@ -286,6 +357,7 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
                      fs: float = 1000.0, health: Mapping[str, float] | None = None, mission_index: int = 0,
                      operating_hours: float = 0.0, n_sub: int = 40, T_amb: float | None = None,
                      input_locked: bool = False, T_ext: np.ndarray | None = None,
+                     fault: Mapping[str, Any] | None = None,
                      ) -> tuple[Mission, dict[str, Any]]:
     """Simulate one mission; returns the contract :class:`Mission` and the ground truth.
 
@@ -295,7 +367,13 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
     the profile, gusts and sensor noise; health: ``{h_plus, h_minus, fs_loss,
     lube_loss}`` at the mission start (default new); n_sub: internal steps per
     log sample (dt = 1/(fs n_sub)); input_locked: WG held (static torsion
-    tests); T_ext: optional extra hinge moment per log sample [N*m].
+    tests); T_ext: optional extra hinge moment per log sample [N*m]; fault: a
+    fault starting inside the mission, ``{"name": "lubrication_loss" |
+    "flexspline_stiffness_loss", "severity": x, "t_onset": s[, "t_ramp": s]}``
+    (see :func:`fault_vector`; applied in the kernel, recorded in
+    ``/sim/effects["fault"]`` and per sample as ``fault_active``/``fault_phi``
+    in ``/sim/internal``). Before the onset the mission is bit-identical to the
+    one without fault (same seed).
 
     Ground truth: ``{"internal": {name: array on the full time grid, "t": t},
     "health": {...}, "effects": {"effects": ..., "params": ...}, "wear":
@@ -317,6 +395,11 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
     q_m = 2 * math.pi / 2 ** effects.p("encoder_quantisation", "bits_m") if effects.is_on("encoder_quantisation") else 0.0
     q_f = 2 * math.pi / 2 ** effects.p("encoder_quantisation", "bits_f") if effects.is_on("encoder_quantisation") else 0.0
     P = kernel_vector(d, params, fs, int(n_sub), q_f, input_locked, profile.q_scale)
+    fault_rec = None
+    if fault is not None:
+        kv, fault_rec = fault_vector(fault, d, n / fs, float(P[K.KI["dt"]]))
+        for k, v in kv.items():
+            P[K.KI[k]] = v
     rng_env = np.random.default_rng([int(seed), 0xA7B])
     gust = profile.gust * (effects.p("aero_gusts", "sigma") if effects.is_on("aero_gusts") else 0.0)
     if T_ext is not None:
@@ -402,7 +485,7 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
     truth = {
         "internal": internal,
         "health": health_out,
-        "effects": {"effects": effects.to_json_dict(), "params": rep},
+        "effects": {"effects": effects.to_json_dict(), "params": rep, **({"fault": fault_rec} if fault_rec else {})},
         "wear": {"W_plus": float(col["W_plus"][-1]), "W_minus": float(col["W_minus"][-1])},
         "final_state": xf,
     }
