@@ -294,3 +294,106 @@ def window_features(mission, window_s: float = 10.0, hop_s: float | None = None,
         f["t_start"], f["t_end"] = float(s), float(s + window_s)
         out.append(f)
     return out
+
+
+# ---- the per-mission prognostic observation: one definition for the node and batch -------------------
+#: window length [s] of the observation: the onboard node's ``window_s`` default (``OnboardConfig.window_s``)
+OBS_WINDOW_S = 1.0
+#: features reduced by summing the windows (exposures); every other feature is reduced by the median
+SUM_FEATURES = ("W_load",)
+
+
+def onboard_window_features(mission, window_s: float = OBS_WINDOW_S, cfg: FeatureConfig | None = None) -> list[dict]:
+    """Batch twin of the onboard node's feature windows: the rows the prognostic node receives.
+
+    Same windows as :class:`hd_onboard.core.OnboardCore` (index ``floor(t / window_s)``
+    with ``t = (stamp_ns - t0_ns) * 1e-9`` since the first stamp; empty windows
+    are not emitted, the last one is closed at the end of the mission) and the
+    same call as the onboard node's window feature function: :func:`block_features`
+    on the raw (unheld) samples of the window, time relative to its first stamp,
+    no segment labels. Temperature is the mission's gearbox temperature on the
+    samples (the node holds its latest value; only ``cs_gain`` depends on it,
+    not the observation). Each dict has ``t_start`` [s] and ``n``.
+    """
+    if not (isinstance(window_s, (int, float)) and np.isfinite(window_s) and 0 < window_s <= 3600):
+        raise ValueError(f"window_s must be in (0, 3600] s, got {window_s!r}")
+    m = mission
+    src = getattr(m.report, "path", "") or f"{m.meta.actuator_id}/mission {m.meta.mission_index}"
+    if m.n == 0:
+        return []
+    # the stamps the node sees (replay publishes the original stamps), and the core's drop of non-increasing ones
+    stamps_ns = int(m.t0_ns) + np.round(np.asarray(m.t) * 1e9).astype(np.int64)
+    keep = stamps_ns > np.maximum.accumulate(np.concatenate([[np.iinfo(np.int64).min], stamps_ns[:-1]]))
+    idx = np.flatnonzero(keep)
+    stamps_ns = stamps_ns[idx]
+    t = (stamps_ns - stamps_ns[0]) * 1e-9
+    widx = np.floor(t / window_s).astype(np.int64)
+    cut = np.flatnonzero(np.diff(widx)) + 1
+    try:
+        temp = np.asarray(m.temperature_on_t("gearbox"), float)[idx]
+    except Exception:  # noqa: BLE001 - temperature is optional
+        temp = None
+    stamp_s = stamps_ns * 1e-9
+    sig = [np.asarray(getattr(m, k), float)[idx] for k in ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red")]
+    out = []
+    for a, b in zip(np.concatenate([[0], cut]), np.concatenate([cut, [len(t)]])):
+        ts = stamp_s[a:b]
+        tw = None if temp is None else temp[a:b]
+        f = block_features(ts - ts[0], *(s[a:b] for s in sig), m.meta.gear_ratio, m.meta.torque_constant,
+                           tw, None, cfg, f"{src} window {int(widx[a])}")
+        f["t_start"], f["n"] = float(widx[a] * window_s), float(b - a)
+        out.append(f)
+    return out
+
+
+def mission_observation(windows) -> dict:
+    """The per-mission prognostic observation from its window feature rows (node and batch alike).
+
+    ``windows``: the mission's window rows, either :func:`block_features` dicts
+    (keys ``HF_MTW_IF``, ...) or the onboard node's published rows (keys
+    ``feat.HF_MTW_IF``, ...). Every feature of :data:`FEATURE_NAMES` is the
+    median of its finite window values (robust to windows with too little
+    rotation, dropouts or transients), except the exposures of
+    :data:`SUM_FEATURES`: ``W_load`` [J] is the sum over the windows (the
+    mission's Archard load-sliding integral). NaN where no window has a value.
+    Also ``n_windows`` and ``n_windows_hf`` (windows with a finite ``HF_MTW_IF``).
+    """
+    rows = list(windows)
+    for i, r in enumerate(rows):
+        if not isinstance(r, dict):
+            raise TypeError(f"mission_observation: window {i} is a {type(r).__name__}, expected a dict")
+
+    def col(name: str) -> np.ndarray:
+        v = np.full(len(rows), np.nan)
+        for i, r in enumerate(rows):
+            x = r.get(name, r.get("feat." + name, np.nan))
+            if isinstance(x, (int, float, np.floating, np.integer)) and not isinstance(x, bool):
+                v[i] = float(x)
+        return v
+
+    out: dict = {}
+    for k in FEATURE_NAMES:
+        v = col(k)
+        v = v[np.isfinite(v)]
+        if not len(v):
+            out[k] = float("nan")
+        else:
+            out[k] = float(np.sum(v)) if k in SUM_FEATURES else float(np.median(v))
+        if k == "HF_MTW_IF":
+            out["n_windows_hf"] = int(len(v))
+    out["n_windows"] = len(rows)
+    return out
+
+
+def mission_observation_features(mission, window_s: float = OBS_WINDOW_S, cfg: FeatureConfig | None = None) -> dict:
+    """Batch per-mission observation: :func:`mission_observation` of :func:`onboard_window_features`.
+
+    What the prognostic node computes from the onboard node's rows of the same
+    mission (tested equal); plus ``mission_index``, ``operating_hours``,
+    ``actuator_id`` and ``window_s``. Never reads ``mission.sim``.
+    """
+    m = mission
+    f = mission_observation(onboard_window_features(m, window_s, cfg))
+    f.update(mission_index=int(m.meta.mission_index), operating_hours=float(m.meta.operating_hours),
+             actuator_id=str(m.meta.actuator_id), window_s=float(window_s))
+    return f

@@ -2,8 +2,10 @@
 
 * :func:`extract_actuator` reads every bag of one actuator (contract topics
   only; ``/sim/health`` only with ``include_truth=True``, which the
-  evaluation code alone passes) and computes the health features and the
-  Archard exposure ``W_load`` of each mission.
+  evaluation code alone passes) and computes each mission's observation
+  exactly as the prognostic node does: the onboard node's 1 s feature
+  windows reduced by ``hd_onboard.features.mission_observation`` (median
+  health features, summed Archard exposure ``W_load``).
 * :func:`fit_population` fits the observation model and the Archard prior
   on *training* actuators (their ``/sim/health`` wear is calibration data).
 * :func:`prognose` runs the particle filter over one actuator's missions in
@@ -108,13 +110,13 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
     result keyed by the bag list, sizes and mtimes.
     """
     from hd_bag import BagError, read_mission
-    from hd_onboard.features import mission_features
+    from hd_onboard.features import OBS_WINDOW_S, mission_observation_features
 
     bags = find_bags(bag_dir)
     from hd_onboard import features as _feat
 
-    key = [[str(b), b.stat().st_size, b.stat().st_mtime_ns] for b in bags] + [include_truth,
-                                                                            list(_feat.FEATURE_NAMES)]
+    key = [[str(b), b.stat().st_size, b.stat().st_mtime_ns] for b in bags] + [
+        include_truth, list(_feat.FEATURE_NAMES), f"mission_observation of {OBS_WINDOW_S} s onboard windows"]
     if cache and Path(cache).exists():
         try:
             d = json.loads(Path(cache).read_text())
@@ -135,7 +137,7 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
         elif m.meta.actuator_id != aid:
             raise ValueError(f"{b}: actuator_id {m.meta.actuator_id!r} differs from {aid!r} in the same folder")
         try:
-            f = mission_features(m)
+            f = mission_observation_features(m)
         except ValueError as e:
             errors.append(f"{b}: {e}")
             continue

@@ -5,9 +5,11 @@ Subscribes ``/hd/onboard/features`` (window rows: ``feat.HF_MTW_IF``,
 boundaries). Per actuator it keeps one particle filter of the Archard wear
 model (``hd_prognostic.hd.build_model`` on the observation model file,
 parameter ``obs_model``; default ``hd_prognostic/default_obs_model.json``)
-and makes **one filter step per mission**, as the batch prognosis does: the
-mission's observation is the median of its window ``HF_MTW_IF`` values, its
-exposure the sum of the window load-sliding integrals ``W_load`` [J].
+and makes **one filter step per mission**, as the batch prognosis does, with
+the same reduction of the window rows (``hd_onboard.features.mission_observation``,
+which batch applies to the same 1 s windows): the mission's observation is
+the median of its window ``HF_MTW_IF`` values, its exposure the sum of the
+window load-sliding integrals ``W_load`` [J].
 During a mission, every ``publish_period_s`` of wall time, it publishes a
 provisional estimate (a copy of the filter updated with the mission so far).
 
@@ -78,11 +80,11 @@ class ActuatorTracker:
         self.windows.extend(rows)
 
     def _mission_obs(self) -> tuple[float, float]:
-        hf = np.array([w.get("feat.HF_MTW_IF", math.nan) for w in self.windows], float)
-        W = np.array([w.get("feat.W_load", math.nan) for w in self.windows], float)
-        y = float(np.nanmedian(hf)) if np.isfinite(hf).any() else math.nan
-        Wm = float(np.nansum(W)) if np.isfinite(W).any() else math.nan
-        return y, Wm
+        """(HF_MTW_IF, W_load) of the mission so far: :func:`hd_onboard.features.mission_observation`."""
+        from hd_onboard.features import mission_observation
+
+        o = mission_observation(self.windows)
+        return o["HF_MTW_IF"], o["W_load"]
 
     def estimate(self, final: bool) -> dict[str, float]:
         """Step (final: commit the mission) or provisional estimate (on a copy)."""
