@@ -22,8 +22,9 @@ from hdphm.ros_cli import Stack, run_stack_on_bags  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
-#: stated detection delay of a sudden grease loss (lubrication_loss severity 3) through the stack,
-#: the same bound as the core tests (tests/onboard/test_sim_and_short_path.py, measured there)
+#: stated detection delay of a sudden grease loss (lubrication_loss severity 3, injected mid-mission by
+#: hd_sim's fault hook) through the stack, the same bound as the core tests
+#: (tests/onboard/test_sim_and_short_path.py, measured there)
 FAULT_DELAY_S = 2.0
 
 
