@@ -38,9 +38,12 @@ def _mission(args) -> int:
     params = nominal() if args.actuator is None else sample_population(args.actuator + 1, args.pop_seed)[-1]
     wear = args.wear * 1e-6
     health = {"h_plus": wear * (1 + args.wear_asym), "h_minus": wear * (1 - args.wear_asym)}
-    m, truth = simulate_mission(params, effects, args.profile, args.seed, duration=args.duration, fs=args.fs,
-                                health=health, mission_index=args.mission_index, n_sub=args.n_sub,
-                                T_amb=args.t_amb, fault=fault)
+    try:
+        m, truth = simulate_mission(params, effects, args.profile, args.seed, duration=args.duration, fs=args.fs,
+                                    health=health, mission_index=args.mission_index, n_sub=args.n_sub,
+                                    T_amb=args.t_amb, fault=fault)
+    except ValueError as e:
+        raise SystemExit(f"hdphm sim mission: {e}") from None
     write_mission(args.out, m, sim=None if args.no_sim else truth)
     print(f"wrote {args.out}: {m.n} samples, {m.duration:.2f} s, actuator {m.meta.actuator_id}, "
           f"profile {args.profile}, h = {truth['health']['h'] * 1e6:.2f} um, effects on: "

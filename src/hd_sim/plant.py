@@ -248,6 +248,8 @@ def parse_fault(text: str) -> dict[str, Any]:
     except ValueError:
         raise ValueError(f"fault {text!r}: expected NAME:SEVERITY@T_ONSET[/T_RAMP], e.g. "
                          f"lubrication_loss:3@10 or flexspline_stiffness_loss:0.3@8/0.1") from None
+    if f["name"] not in MID_MISSION_FAULTS:
+        raise ValueError(f"fault {text!r}: name {f['name']!r} is not one of {sorted(MID_MISSION_FAULTS)}")
     return f
 
 

@@ -146,3 +146,9 @@ def test_parse_fault_and_cli_writes_the_truth(tmp_path):
     assert fa[t < 0.6 - 1e-9].max() == 0.0 and fa[t >= 0.6].min() == 1.0
     with pytest.raises(SystemExit, match="--fault"):
         main(["sim", "mission", "--out", str(tmp_path / "g.mcap"), "--duration", "1.0", "--fault", "grease"])
+    with pytest.raises(SystemExit, match="--fault.*not one of"):
+        main(["sim", "mission", "--out", str(tmp_path / "g.mcap"), "--duration", "1.0", "--fault", "grease:1@0.5"])
+    with pytest.raises(SystemExit, match="severity 1.2 outside"):
+        main(["sim", "mission", "--out", str(tmp_path / "g.mcap"), "--duration", "1.0",
+              "--fault", "flexspline_stiffness_loss:1.2@0.5"])
+    assert not (tmp_path / "g.mcap").exists()
