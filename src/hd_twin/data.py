@@ -16,7 +16,11 @@ build the twin's input identically.
   itself (a flap angle is bounded), the tracking error ``theta_ref -
   theta_f``, the speeds, tau_m, the temperature, and causal backward-difference
   accelerations of omega_m and omega_f (the inertia torques J theta'' are a
-  large part of Q_red in fast manoeuvres). All features are causal, so the
+  large part of Q_red in fast manoeuvres), and the odd powers ``phi |phi|``
+  [rad^2] and ``phi^3`` [rad^3] of the twist: with them the linear skip path
+  represents a hardening torsion law (the catalogue K1/K2/K3 curve, or
+  k1 phi + k3 phi^3, PHYSICS.md 2.1) exactly, instead of leaving an S-shaped
+  bias for the LSTM to learn. All features are causal, so the
   streaming runtime computes them sample by sample (carrying one previous row).
 * Pre-processing (:func:`preprocess`): optional anti-alias filter (causal
   Butterworth, second-order sections, applied identically in batch and
@@ -57,7 +61,12 @@ FEATURES = (
     "temperature",
     "alpha_m_bd",
     "alpha_f_bd",
+    "phi_abs_phi",
+    "phi_cubed",
 )
+#: The 13 features of hd_twin/1 models trained before the torsion-law features
+#: existed; such models keep working (the feature list is stored in config.json).
+FEATURES_V1 = FEATURES[:13]
 #: Network outputs: Q_red [N*m], u = x_FS - r_b theta_m [m], y_FS [m].
 OUTPUTS = ("Q_red", "u_FS", "y_FS")
 
@@ -89,13 +98,16 @@ def mission_inputs(mission) -> np.ndarray:
 
 
 def features(X: np.ndarray, N: float, dt: float, prev: np.ndarray | None = None,
-             fill: np.ndarray | None = None) -> np.ndarray:
-    """Network features ``F[n, 13]`` (float64) from raw inputs ``X[n, 7]`` at the model rate; see the module docstring.
+             fill: np.ndarray | None = None, names: Sequence[str] | None = None) -> np.ndarray:
+    """Network features ``F[n, len(names)]`` (float64) from raw inputs ``X[n, 7]`` at the model rate; see the module docstring.
+
+    ``names`` selects and orders the columns (default :data:`FEATURES`; a
+    model's ``config.json["features"]``, so older models keep their set).
 
     ``dt`` [s] is the model sample period, ``prev`` the raw input row before
     ``X[0]`` (streaming: the last row of the previous block; None at a
     segment start, where the backward differences are zero). ``fill``
-    (length 13) replaces non-finite feature values (e.g. no temperature
+    (length ``len(names)``) replaces non-finite feature values (e.g. no temperature
     sensor, no command yet); by default they stay NaN.
     """
     X = np.asarray(X, dtype=np.float64)
@@ -106,9 +118,10 @@ def features(X: np.ndarray, N: float, dt: float, prev: np.ndarray | None = None,
     th_m, w_m, tau, th_f, w_f, temp, th_ref = X.T
     w_prev = X[:1, [1, 4]] if prev is None else np.asarray(prev, dtype=np.float64)[None, [1, 4]]
     acc = np.diff(np.vstack([w_prev, X[:, [1, 4]]]), axis=0) / dt  # causal backward differences
+    phi = th_f - th_m / N
     F = np.column_stack(
         [
-            th_f - th_m / N,
+            phi,
             np.sin(th_m),
             np.cos(th_m),
             np.sin(2 * th_m),
@@ -121,13 +134,25 @@ def features(X: np.ndarray, N: float, dt: float, prev: np.ndarray | None = None,
             temp,
             acc[:, 0],
             acc[:, 1],
+            phi * np.abs(phi),
+            phi**3,
         ]
     )
+    if names is not None and tuple(names) != FEATURES:
+        F = F[:, feature_columns(names)]
     if fill is not None:
         bad = ~np.isfinite(F)
         if bad.any():
             F[bad] = np.broadcast_to(np.asarray(fill, dtype=np.float64), F.shape)[bad]
     return F
+
+
+def feature_columns(names: Sequence[str]) -> list[int]:
+    """Column indices of ``names`` in :data:`FEATURES`; ValueError naming an unknown feature."""
+    unknown = [n for n in names if n not in FEATURES]
+    if unknown:
+        raise ValueError(f"unknown twin feature(s) {unknown}; known: {FEATURES}")
+    return [FEATURES.index(n) for n in names]
 
 
 def segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
@@ -220,8 +245,11 @@ def decimation_for(fs: float, fs_model: float | None, where: str) -> int:
     return d
 
 
-def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_len: int = 16) -> list[Segment]:
+def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_len: int = 16,
+               names: Sequence[str] | None = None) -> list[Segment]:
     """Split a Mission into gap-free, anti-aliased, decimated :class:`Segment` s at ``fs_model`` Hz.
+
+    ``names``: the feature columns of ``Segment.F`` (default :data:`FEATURES`).
 
     Segments shorter than ``min_len`` samples (after decimation) are dropped.
     Raises ValueError naming the bag when the mission is unusable.
@@ -265,6 +293,8 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
         F = features(X, N, dt)
         F[:, 9] = np.nan if absent[6] or absent[3] else F[:, 9]  # no command: feature -> training mean
         F[:, 10] = np.nan if absent[5] else F[:, 10]  # no temperature sensor: feature -> training mean
+        if names is not None and tuple(names) != FEATURES:
+            F = F[:, feature_columns(names)]
         temp = np.full(len(X), T_ref) if absent[5] else X[:, 5].copy()
         out.append(
             Segment(
@@ -299,7 +329,7 @@ class Normalizer:
     q_std: float
 
     @classmethod
-    def fit(cls, segments: Sequence[Segment]) -> "Normalizer":
+    def fit(cls, segments: Sequence[Segment], names: Sequence[str] = FEATURES) -> "Normalizer":
         F = np.concatenate([s.F for s in segments])
         Q = np.concatenate([s.Q_red[s.mask] for s in segments])
         if len(Q) < 2:
@@ -307,9 +337,12 @@ class Normalizer:
         mean = np.nanmean(F, axis=0)
         std = np.nanstd(F, axis=0)
         mean = np.where(np.isfinite(mean), mean, 0.0)
-        std = np.where(np.isfinite(std) & (std > 1e-12), std, 1.0)
+        # relative test: the twist powers are tiny in SI (phi^3 ~ 1e-8 rad^3) but informative
+        std = np.where(np.isfinite(std) & (std > 0) & (std > 1e-9 * np.abs(mean)), std, 1.0)
         # sin/cos features keep their natural scale (zero mean, unit amplitude)
-        for j, name in enumerate(FEATURES):
+        if F.shape[1] != len(names):
+            raise ValueError(f"Normalizer.fit: segments have {F.shape[1]} features, names give {len(names)}")
+        for j, name in enumerate(names):
             if name.startswith(("sin_", "cos_")):
                 mean[j], std[j] = 0.0, 1.0
         q_std = float(np.std(Q))

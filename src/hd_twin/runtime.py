@@ -45,6 +45,8 @@ class StreamingTwin:
         so.inter_op_num_threads = 1
         self.session = ort.InferenceSession(str(onnx_path), so, providers=["CPUExecutionProvider"])
         self.norm = D.Normalizer.from_dict(self.config["normalization"])
+        self.feature_names = tuple(self.config.get("features", D.FEATURES_V1))
+        D.feature_columns(self.feature_names)  # ValueError on a feature this version cannot compute
         self.layers = int(self.config["arch"]["layers"])
         self.hidden = int(self.config["arch"]["hidden"])
         self.params = self.config["params"]
@@ -113,7 +115,7 @@ class StreamingTwin:
         Xd = Xf[idx]
         if len(Xd) == 0:
             return {k: np.zeros(0) for k in OUTPUT_NAMES} | {"index": idx}
-        F = D.features(Xd, self.N, self.decimation / self.fs_in, prev=self._prev)
+        F = D.features(Xd, self.N, self.decimation / self.fs_in, prev=self._prev, names=self.feature_names)
         self._prev = Xd[-1].copy()
         Z = self.norm.norm_features(F).astype(np.float32)[None]
         y, self.h, self.c = self.session.run(None, {"x": Z, "h0": self.h, "c0": self.c})

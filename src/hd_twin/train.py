@@ -520,7 +520,8 @@ def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
     """Metrics of a trained model on other missions (N, k_t from each bag's metadata)."""
     pinn, norm, cfgd = load_pinn(model_dir)
     fs_model = cfgd["preprocessing"]["fs_model"]
-    segs = [s for m in missions for s in D.preprocess(m, fs_model, T_ref=pinn.params.T_ref)]
+    names = cfgd.get("features", D.FEATURES_V1)
+    segs = [s for m in missions for s in D.preprocess(m, fs_model, T_ref=pinn.params.T_ref, names=names)]
     if not segs:
         raise ValueError("no usable segment in the given missions")
     met = evaluate(pinn, segs, norm)

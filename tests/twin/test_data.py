@@ -104,3 +104,35 @@ def test_find_bags_errors(tmp_path):
         D.find_bags([tmp_path / "nope"])
     with pytest.raises(ValueError, match="no .mcap"):
         D.find_bags([tmp_path])
+
+
+def test_torsion_law_features_and_older_feature_sets():
+    """phi|phi| and phi^3 make a hardening law linear in the features; a stored 13-feature list still works."""
+    m = synth_mission(duration=1.0)
+    X = D.mission_inputs(m)
+    N = m.meta.gear_ratio
+    F = D.features(X, N, 1 / m.fs)
+    phi = X[:, 3] - X[:, 0] / N
+    j2, j3 = D.FEATURES.index("phi_abs_phi"), D.FEATURES.index("phi_cubed")
+    np.testing.assert_allclose(F[:, j2], phi * np.abs(phi), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(F[:, j3], phi**3, rtol=1e-12, atol=0)
+    # a piecewise K1/K2/K3 torque (PHYSICS.md 2.1) is fitted far better with the powers than by phi alone
+    a = np.abs(phi).max()
+    K1, K2, K3, p1, p2 = 1.0, 1.6, 1.9, 0.2 * a, 0.5 * a
+    ap = np.abs(phi)
+    T = np.sign(phi) * np.where(ap < p1, K1 * ap, np.where(ap < p2, K1 * p1 + K2 * (ap - p1),
+                                                            K1 * p1 + K2 * (p2 - p1) + K3 * (ap - p2)))
+    def fit_res(A):
+        A = A / np.abs(A).max(axis=0)
+        return np.linalg.lstsq(A, T, rcond=None)[1][0]
+    assert fit_res(F[:, [0, j2, j3]]) < 0.05 * fit_res(F[:, [0]])
+    # selection by name: the pre-existing 13-feature models keep their columns
+    F13 = D.features(X, N, 1 / m.fs, names=D.FEATURES_V1)
+    np.testing.assert_array_equal(F13, F[:, :13])
+    s13 = D.preprocess(m, names=D.FEATURES_V1)[0]
+    assert s13.F.shape[1] == 13
+    with pytest.raises(ValueError, match="unknown twin feature"):
+        D.features(X, N, 1 / m.fs, names=("phi", "backlash_angle"))
+    # tiny but informative power features are standardised, not left at std 1
+    norm = D.Normalizer.fit(D.preprocess(m))
+    assert norm.f_std[j3] < 1e-3 and norm.f_std[j3] > 0
