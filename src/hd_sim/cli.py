@@ -48,6 +48,10 @@ def _mission(args) -> int:
     print(f"wrote {args.out}: {m.n} samples, {m.duration:.2f} s, actuator {m.meta.actuator_id}, "
           f"profile {args.profile}, h = {truth['health']['h'] * 1e6:.2f} um, effects on: "
           + ",".join(k for k, v in effects.on.items() if v))
+    if args.plot:
+        from .plot import plot_mission
+
+        print(f"wrote {plot_mission(args.plot, m, truth)}")
     if fault:
         fr = truth["effects"]["fault"]
         print(f"fault {fr['name']} {fr['before']:g} -> {fr['after']:g} from t = {fr['t_onset']:.4f} s "
@@ -106,6 +110,7 @@ def register(subparsers) -> None:
     pm.add_argument("--wear-asym", type=float, default=0.0, help="(h+ - h-)/(h+ + h-), in [-1, 1]")
     pm.add_argument("--mission-index", type=int, default=0)
     pm.add_argument("--t-amb", type=float, default=None, help="ambient temperature, degC (default: random)")
+    pm.add_argument("--plot", default=None, metavar="PNG", help="also write a PNG of signals and true internals")
     pm.add_argument("--fault", default=None, metavar="NAME:SEVERITY@T_ONSET[/T_RAMP]",
                     help="fault starting inside the mission (s from its start; ramp default 0.05 s): "
                          "lubrication_loss (friction x (1 + severity)) or flexspline_stiffness_loss "

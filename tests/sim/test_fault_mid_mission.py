@@ -137,7 +137,8 @@ def test_parse_fault_and_cli_writes_the_truth(tmp_path):
 
     out = tmp_path / "f.mcap"
     assert main(["sim", "mission", "--out", str(out), "--duration", "1.0", "--seed", "2",
-                 "--fault", "lubrication_loss:2@0.6/0.01"]) == 0
+                 "--fault", "lubrication_loss:2@0.6/0.01", "--plot", str(tmp_path / "f.png")]) == 0
+    assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     m = read_mission(out, include_sim=True)
     eff = m.sim["/sim/effects"]
     assert eff["fault"]["name"] == "lubrication_loss" and eff["fault"]["t_onset"] == pytest.approx(0.6)
