@@ -48,8 +48,9 @@ phi rises linearly from 1/flt_n_ramp to 1 over ``flt_n_ramp`` steps and
 
     T_C, T_C_out, b_in, b_out, mu_c, mu_bb  x  1 + (flt_fric - 1) phi     (lubrication_loss)
     k_FS                                    x  1 + (flt_kFS - 1) phi      (flexspline_stiffness_loss)
+    bw_A; bw_beta = bw_gamma                x  1 + (flt_bwA - 1) phi; 1 + (flt_bwb - 1) phi
 
-(the Bouc-Wen parameters keep their start-of-mission values). Before the
+(the hysteresis follows k_FS so the loop keeps its catalogue width). Before the
 onset no parameter is touched, so the trajectory is bit-identical to the
 run without fault. Logged: ``fault_active`` (0/1, 1 from the onset) and
 ``fault_phi`` (0..1).
@@ -89,7 +90,7 @@ KNAMES = (
     # thermal
     "C_w", "R_wh", "C_h", "R_ha", "heat_on",
     # mid-mission fault (hd_sim.plant.fault_vector): onset step, ramp steps, final multipliers
-    "flt_n_on", "flt_n_ramp", "flt_fric", "flt_kFS",
+    "flt_n_on", "flt_n_ramp", "flt_fric", "flt_kFS", "flt_bwA", "flt_bwb",
     # numerics
     "dt", "n_sub",
 )
@@ -198,7 +199,8 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
     C_w = P[K_C_w]; R_wh = P[K_R_wh]; C_h = P[K_C_h]; R_ha = P[K_R_ha]; heat_on = P[K_heat_on]
     dt = P[K_dt]; n_sub = int(P[K_n_sub])
     flt_n_on = P[K_flt_n_on]; flt_n_ramp = max(P[K_flt_n_ramp], 1.0)
-    flt_fric = P[K_flt_fric]; flt_kFS = P[K_flt_kFS]
+    flt_fric = P[K_flt_fric]; flt_kFS = P[K_flt_kFS]; flt_bwA = P[K_flt_bwA]; flt_bwb = P[K_flt_bwb]
+    bw_A0 = bw_A; bw_beta0 = bw_beta; bw_gamma0 = bw_gamma
     T_C00 = T_C0; T_C_out00 = T_C_out0; b_in00 = b_in0; b_out00 = b_out0; mu_c0 = mu_c; mu_bb0 = mu_bb
     k_FS0 = k_FS
     phi = 0.0; f_on = 0.0
@@ -229,6 +231,9 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
                 T_C0 = T_C00 * mf; T_C_out0 = T_C_out00 * mf; b_in0 = b_in00 * mf; b_out0 = b_out00 * mf
                 mu_c = mu_c0 * mf; mu_bb = mu_bb0 * mf
                 k_FS = k_FS0 * (1.0 + (flt_kFS - 1.0) * phi)
+                bw_A = bw_A0 * (1.0 + (flt_bwA - 1.0) * phi)
+                mb = 1.0 + (flt_bwb - 1.0) * phi
+                bw_beta = bw_beta0 * mb; bw_gamma = bw_gamma0 * mb
             # ---- slow quantities at the control rate -------------------------------------
             if step % n_ctrl == 0:
                 if tdf_on > 0.5:

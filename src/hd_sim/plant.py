@@ -65,6 +65,18 @@ def bouc_wen_z_max(width: float, A: float, k_FS: float, F_pk: float) -> float:
     return float(np.interp(width, w[: i_pk + 1], zs[: i_pk + 1]))
 
 
+def bouc_wen_params(params: Mapping[str, Any], effects: EffectSet, k_FS: float) -> tuple[float, float, float]:
+    """(bw_A [N/m], z_max [N], bw_beta = bw_gamma [1/m]) of the flexspline hysteresis for stiffness k_FS [N/m].
+
+    The zero-torque loop width at +-T_rated equals ``hysteresis.loss_arcmin`` at the output, whatever k_FS.
+    """
+    bw_A = effects.p("hysteresis", "A_ratio") * k_FS
+    loss = effects.p("hysteresis", "loss_arcmin") * ARCMIN * params["r_m"]
+    on = effects.is_on("hysteresis") and loss > 0
+    z_max = bouc_wen_z_max(loss, bw_A, k_FS, params["T_rated"] / params["r_m"]) if on else 0.0
+    return bw_A, z_max, (bw_A / (2.0 * z_max) if z_max > 0 else 0.0)
+
+
 def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, float]) -> dict[str, float]:
     """Physical parameters of this mission (after wear and faults), SI; written to /sim/effects 'params'."""
     check_params(params)
@@ -117,10 +129,8 @@ def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, 
         j = max(0.0, (hp + hm - 2.0 * p["delta_0"]) if wear else 0.0) / math.cos(p["alpha_p"])
         j += effects.p("backlash", "j0")
     # hysteresis: zero-torque loop width (output angle) at +-T_rated = loss_arcmin
-    bw_A = effects.p("hysteresis", "A_ratio") * k_FS_eff
-    loss = effects.p("hysteresis", "loss_arcmin") * ARCMIN * r_m
-    z_max = bouc_wen_z_max(loss, bw_A, k_FS_eff, p["T_rated"] / r_m) if (on("hysteresis") and loss > 0) else 0.0
-    bw_beta = bw_gamma = bw_A / (2.0 * z_max) if z_max > 0 else 0.0
+    bw_A, z_max, bw_beta = bouc_wen_params(p, effects, k_FS_eff)
+    bw_gamma = bw_beta
     mu_c = 0.0
     if on("load_dependent_friction"):
         mu_c = (_eff(p, effects, "load_dependent_friction", "mu_flank") * mu_g
@@ -213,7 +223,7 @@ def kernel_vector(d: Mapping[str, float], p: Mapping[str, Any], fs: float, n_sub
         Kp_p=w_p, omega_max_f=math.radians(p["rate_max_deg"]),
         n_ctrl=float(max(1, int(round(1.0 / (p["f_ctrl"] * dt))))), q_f=quant_f,
         input_locked=float(input_locked), dt=dt, n_sub=float(n_sub),
-        flt_n_on=-1.0, flt_n_ramp=1.0, flt_fric=1.0, flt_kFS=1.0,  # no fault (see fault_vector)
+        flt_n_on=-1.0, flt_n_ramp=1.0, flt_fric=1.0, flt_kFS=1.0, flt_bwA=1.0, flt_bwb=1.0,  # no fault
     )
     v = np.empty(len(K.KNAMES))
     for name, i in K.KI.items():
@@ -253,14 +263,17 @@ def parse_fault(text: str) -> dict[str, Any]:
     return f
 
 
-def fault_vector(fault: Mapping[str, Any], d: Mapping[str, float], duration: float,
-                 dt: float) -> tuple[dict[str, float], dict[str, Any]]:
+def fault_vector(fault: Mapping[str, Any], d: Mapping[str, float], duration: float, dt: float,
+                 params: Mapping[str, Any], effects: EffectSet) -> tuple[dict[str, float], dict[str, Any]]:
     """Kernel entries ``flt_*`` and the /sim/effects record of a mid-mission fault.
 
     fault: ``{"name", "severity", "t_onset" [s from the first sample], "t_ramp" [s, default
     FAULT_RAMP_S]}``; d: :func:`derived` of the mission (its ``lube_loss``/``fs_loss`` are the
     state before the onset: the fault takes them to ``max(before, severity)``, per the effect's
-    law in :func:`derived`, and never heals). Raises ValueError naming the bad field.
+    law in :func:`derived`, and never heals). A flexspline loss also moves the Bouc-Wen
+    parameters to the values :func:`derived` gives at the new k_FS (:func:`bouc_wen_params`: the
+    same hysteresis loss in arcmin), so after the ramp the plant equals a mission started with the
+    fault. Raises ValueError naming the bad field.
     """
     if not isinstance(fault, Mapping):
         raise ValueError(f"fault must be a dict {{name, severity, t_onset[, t_ramp]}}, got {type(fault).__name__}")
@@ -282,18 +295,23 @@ def fault_vector(fault: Mapping[str, Any], d: Mapping[str, float], duration: flo
         raise ValueError(f"fault {name}: t_onset {t_on!r} s outside the mission [0, {duration:g}) s")
     if not (math.isfinite(ramp) and ramp >= 0.0):
         raise ValueError(f"fault {name}: t_ramp {ramp!r} s must be finite and >= 0")
-    fric = kfs = 1.0
+    fric = kfs = bwA = bwb = 1.0
+    z_after = float(d["z_max"])
     if name == "lubrication_loss":
         before = float(d["lube_loss"]); after = max(before, sev)
         fric = (1.0 + after) / (1.0 + before)
     else:
         before = float(d["fs_loss"]); after = max(before, sev)
         kfs = (1.0 - after) / (1.0 - before)
+        if d["z_max"] > 0:
+            A1, z_after, b1 = bouc_wen_params(params, effects, d["k_FS"] * kfs)
+            bwA, bwb = A1 / d["bw_A"], b1 / d["bw_beta"]
     n_on = float(round(t_on / dt))
     n_ramp = float(max(1, int(round(ramp / dt))))
-    kv = {"flt_n_on": n_on, "flt_n_ramp": n_ramp, "flt_fric": fric, "flt_kFS": kfs}
+    kv = {"flt_n_on": n_on, "flt_n_ramp": n_ramp, "flt_fric": fric, "flt_kFS": kfs, "flt_bwA": bwA, "flt_bwb": bwb}
     rec = {"name": name, "severity": sev, "t_onset": n_on * dt, "t_ramp": n_ramp * dt,
            "before": before, "after": after, "friction_factor": fric, "k_FS_factor": kfs,
+           "bw_A_factor": bwA, "bw_beta_factor": bwb, "z_max_after": z_after,
            "law": MID_MISSION_FAULTS[name][0]}
     return kv, rec
 
@@ -399,7 +417,7 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
     P = kernel_vector(d, params, fs, int(n_sub), q_f, input_locked, profile.q_scale)
     fault_rec = None
     if fault is not None:
-        kv, fault_rec = fault_vector(fault, d, n / fs, float(P[K.KI["dt"]]))
+        kv, fault_rec = fault_vector(fault, d, n / fs, float(P[K.KI["dt"]]), params, effects)
         for k, v in kv.items():
             P[K.KI[k]] = v
     rng_env = np.random.default_rng([int(seed), 0xA7B])

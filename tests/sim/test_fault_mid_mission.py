@@ -99,6 +99,27 @@ def test_three_body_residuals_vanish_with_a_fault(fault):
                                    atol=1e-9 * np.abs(I["F_mx"]).max())
 
 
+@pytest.mark.parametrize("name, sev, key, names", [
+    ("lubrication_loss", 2.0, "lube_loss", ("T_C", "T_C_out", "b_in", "b_out", "mu_c", "mu_bb")),
+    ("flexspline_stiffness_loss", 0.3, "fs_loss", ("k_FS", "bw_A", "bw_beta", "bw_gamma")),
+])
+def test_after_the_ramp_the_plant_equals_a_mission_started_with_the_fault(name, sev, key, names):
+    eff = EffectSet.default()
+    _, ta = simulate_mission(None, eff, "inspection", 2, duration=0.6, fault={"name": name, "severity": sev,
+                                                                            "t_onset": 0.3})
+    _, tb = simulate_mission(None, eff.with_on(name), "inspection", 2, duration=0.6, health={key: sev})
+    rec, pa, pb = ta["effects"]["fault"], ta["effects"]["params"], tb["effects"]["params"]
+    assert pb[key] == sev and rec["after"] == sev
+    fac = {"T_C": "friction_factor", "T_C_out": "friction_factor", "b_in": "friction_factor",
+           "b_out": "friction_factor", "mu_c": "friction_factor", "mu_bb": "friction_factor",
+           "k_FS": "k_FS_factor", "bw_A": "bw_A_factor", "bw_beta": "bw_beta_factor", "bw_gamma": "bw_beta_factor"}
+    for nm in names:
+        assert pa[nm] > 0, nm
+        assert pa[nm] * rec[fac[nm]] == pytest.approx(pb[nm], rel=1e-9), nm
+    if name == "flexspline_stiffness_loss":
+        assert rec["z_max_after"] == pytest.approx(pb["z_max"], rel=1e-9) and rec["bw_A_factor"] < 1.0
+
+
 def test_fault_on_top_of_existing_degradation_never_heals():
     h = {"lube_loss": 1.0}
     eff = EffectSet.default().with_on("lubrication_loss")
