@@ -75,11 +75,15 @@ def measure_delays(n: int = 8, severity: float = 3.0, actuator: int = 1, duratio
     return rows
 
 
-if __name__ == "__main__":  # python -m tests.onboard.simfix [severity] [splice]
-    import sys
+if __name__ == "__main__":  # python -m tests.onboard.simfix [--severity 3] [--effect NAME] [--splice]
+    import argparse
 
-    sev = float(sys.argv[1]) if len(sys.argv) > 1 else 3.0
-    spl = len(sys.argv) > 2 and sys.argv[2] == "splice"
-    for row in measure_delays(severity=sev, splice=spl):
+    ap = argparse.ArgumentParser(description="onboard detection delay on sim missions with a mid-mission fault")
+    ap.add_argument("--severity", type=float, default=3.0)
+    ap.add_argument("--effect", default="lubrication_loss", choices=("lubrication_loss", "flexspline_stiffness_loss"))
+    ap.add_argument("--splice", action="store_true", help="the former spliced construction, for comparison")
+    ap.add_argument("-n", type=int, default=8, help="missions (onset 8 + 0.5 k s, seed 20 + k)")
+    a = ap.parse_args()
+    for row in measure_delays(n=a.n, severity=a.severity, effect=a.effect, splice=a.splice):
         d = "missed" if row[3] is None else f"{row[3]:+.2f} s"
         print(f"seed {row[0]} onset {row[1]:.1f} s: flag at {row[2]} -> delay {d} {str(row[4])[:60]}", flush=True)

@@ -12,8 +12,8 @@ from hd_onboard.node import _feature_fn  # noqa: E402
 
 #: stated detection delay of a sudden grease loss (friction x4, lubrication_loss severity 3, hd_sim's
 #: mid-mission fault hook, 50 ms ramp) with the physics stand-in twin. Measured over 8 sim missions
-#: (actuator 1, onset 8 + 0.5 k s, seed 20 + k; `python -m tests.onboard.simfix 3`): delays 0.16-0.30 s
-#: in 6, 1.05 s in 1 (friction shows only while the output moves), 1 mission (seed 23) flagged at 7.6 s,
+#: (actuator 1, onset 8 + 0.5 k s, seed 20 + k; `python -m tests.onboard.simfix --severity 3`):
+#: delays 0.16-0.30 s in 6, 1.05 s in 1 (friction shows only while the output moves), 1 mission (seed 23) flagged at 7.6 s,
 #: before the onset (a false alarm on its bit-identical healthy part). Severity 2: delays 0.29-2.48 s in 6,
 #: 1 missed. (The former spliced construction gave 0.14-0.68 s in 5, 1.81 s in 1: the bound still holds.)
 #: This mission (seed 3, onset 10 s) is flagged 0.20 s after the onset.
