@@ -38,10 +38,42 @@ def advance_health(health: Mapping[str, float], wear: Mapping[str, float], param
     if effects.is_on("meshing_wear"):
         h["h_plus"] = h["h_plus"] + archard_increment(wear["W_plus"], params, duration, lube)
         h["h_minus"] = h["h_minus"] + archard_increment(wear["W_minus"], params, duration, lube)
-    for name, key in (("flexspline_stiffness_loss", "fs_loss"), ("lubrication_loss", "lube_loss")):
+    for name, key in FAULT_HEALTH:
         if effects.is_on(name) and mission_index + 1 >= effects.p(name, "onset"):
-            h[key] = min(h.get(key, 0.0) + effects.p(name, "rate"), 0.9)
+            h[key] = _grown(h, effects, name, key)
     return h
+
+
+#: fleet faults -> their health key.
+FAULT_HEALTH = (("flexspline_stiffness_loss", "fs_loss"), ("lubrication_loss", "lube_loss"))
+#: window of the mission (fraction of its duration) in which a fleet fault's onset is drawn.
+ONSET_WINDOW = (0.2, 0.8)
+
+
+def _grown(h: Mapping[str, float], effects: EffectSet, name: str, key: str) -> float:
+    """Fault level after one more mission of growth (``rate`` per mission, capped at 0.9)."""
+    return min(h.get(key, 0.0) + effects.p(name, "rate"), 0.9)
+
+
+def onset_fault(health: Mapping[str, float], effects: EffectSet, mission_index: int, duration: float,
+                seed: int) -> dict[str, float] | None:
+    """The fault that starts **inside** mission ``mission_index`` of a life, or None.
+
+    A fleet fault (``onset``, ``rate`` per mission) first grows after mission
+    ``ceil(onset) - 1``; that mission carries the onset at a time drawn uniformly in
+    ``ONSET_WINDOW`` x duration (seeded), stepping to the level the next mission starts
+    with, so the fault appears mid-mission as in service, not at a mission boundary. If
+    both faults start in the same mission, the flexspline one is injected and the other
+    only grows between missions.
+    """
+    for name, key in FAULT_HEALTH:
+        if not effects.is_on(name) or effects.p(name, "rate") <= 0.0:
+            continue
+        first = max(0, int(np.ceil(effects.p(name, "onset"))) - 1)
+        if mission_index == first:
+            u = float(np.random.default_rng([int(seed), 0xFA17]).uniform(*ONSET_WINDOW))
+            return {"name": name, "severity": _grown(health, effects, name, key), "t_onset": u * duration}
+    return None
 
 
 def simulate_life(params: Mapping[str, Any], n_missions: int, out_dir: str | os.PathLike | None = None, *,
@@ -70,12 +102,15 @@ def simulate_life(params: Mapping[str, Any], n_missions: int, out_dir: str | os.
     for m in range(n_missions):
         mseed = int(np.random.default_rng([int(seed), int(params.get("seed", 0)), zlib.crc32(aid.encode()), m]).integers(2**31))
         prof = profiles[m % len(profiles)]
+        fault = onset_fault(health, effects, m, duration, mseed)
         mission, truth = simulate_mission(params, effects, prof, mseed, duration=duration, fs=fs, health=health,
-                                          mission_index=m, operating_hours=hours, n_sub=n_sub)
+                                          mission_index=m, operating_hours=hours, n_sub=n_sub, fault=fault)
         failed = 0.5 * (health["h_plus"] + health["h_minus"]) >= params["h_fail"]
         rec = {"mission_index": m, "seed": mseed, "profile": prof, "operating_hours": hours,
                **{k: float(v) for k, v in health.items()}, "h": 0.5 * (health["h_plus"] + health["h_minus"]),
                **truth["wear"], "failed": bool(failed)}
+        if fault is not None:
+            rec["fault"] = truth["effects"]["fault"]
         if out_dir is not None:
             from hd_bag import write_mission
 

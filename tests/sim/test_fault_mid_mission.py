@@ -174,3 +174,17 @@ def test_parse_fault_and_cli_writes_the_truth(tmp_path):
         main(["sim", "mission", "--out", str(tmp_path / "g.mcap"), "--duration", "1.0",
               "--fault", "flexspline_stiffness_loss:1.2@0.5"])
     assert not (tmp_path / "g.mcap").exists()
+
+
+def test_fleet_fault_starts_inside_the_mission_before_its_first_growth():
+    from hd_sim import nominal
+    from hd_sim.fleet import simulate_life
+
+    eff = EffectSet.default().with_on("lubrication_loss").with_params(
+        **{"lubrication_loss.onset": 2.0, "lubrication_loss.rate": 0.5})
+    rows = simulate_life(nominal(), 4, None, effects=eff, duration=1.0, seed=1)
+    assert [r["lube_loss"] for r in rows] == [0.0, 0.0, 0.5, 0.9]  # growth capped at 0.9
+    assert "fault" not in rows[0] and "fault" not in rows[2] and "fault" not in rows[3]
+    f = rows[1]["fault"]
+    assert f["name"] == "lubrication_loss" and f["before"] == 0.0 and f["after"] == 0.5
+    assert 0.2 <= f["t_onset"] <= 0.8 and f["friction_factor"] == pytest.approx(1.5)
