@@ -176,7 +176,7 @@ def stack_windows(segs: Sequence[D.Segment], norm: D.Normalizer, length: int, st
     W = len(idx)
     out = {k: np.zeros((W, length), np.float32) for k in chans + ("omega_m", "tau_m", "theta_m", "theta_f", "omega_f")}
     out["mask"] = np.zeros((W, length), bool)
-    out["x"] = np.zeros((W, length, len(D.FEATURES)), np.float32)
+    out["x"] = np.zeros((W, length, len(norm.f_mean)), np.float32)
     out["dt"] = np.zeros((W, 1), np.float32)
     Z = [norm.norm_features(s.F) for s in segs]
     for w, (i, s0) in enumerate(idx):
