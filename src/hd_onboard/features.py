@@ -16,7 +16,8 @@ nominal law misses. One least-squares fit per block separates them::
   amplitude (regression on theta_m is order tracking that needs no
   resampling and tolerates NaN, gaps and irregular stamps). The in-flight
   feature ``HF_MTW_IF`` is this amplitude by default.
-* ``ke_1x``, ``ke_4x`` [rad]; ``lost_motion`` = 2 |c_bl| [rad] (the jump of
+* ``ke_1x``, ``ke_4x`` [rad]; ``ke_kx_s``, ``ke_kx_c`` = a_k, b_k [rad] (the
+  phasors, for coherent averaging over windows); ``lost_motion`` = 2 |c_bl| [rad] (the jump of
   the output across a torque reversal); ``hysteresis`` = 2 |c_hy| [rad];
   ``compliance_residual`` = c_Q [rad/(N m)] (what the nominal law misses:
   stiffness loss); ``te_rms`` [rad]: RMS of TE minus its mean and linear
@@ -53,6 +54,9 @@ FEATURE_NAMES = (
     "HF_MTW_IF", "ke_2x", "ke_1x", "ke_4x", "lost_motion", "hysteresis", "compliance_residual", "te_rms",
     "ke_indicator", "cs_gain", "cs_coulomb", "cs_rms_ratio", "efficiency", "W_load",
 )
+#: order-tracked phasor components a_k, b_k [rad] of the k x wave-generator orders (sin, cos of k theta_m):
+#: theta_m is the absolute motor angle, so the phasors of a mission's windows add coherently
+PHASOR_NAMES = tuple(f"ke_{k}x_{p}" for k in (1, 2, 4) for p in ("s", "c"))
 
 
 @dataclass
@@ -147,7 +151,7 @@ def block_features(
     t, theta_m, theta_f, omega_m, omega_f, tau_m, Q_red = arrs
     seg = np.zeros(n, np.int64) if segment is None else np.asarray(segment)
     notes: list[str] = []
-    out = {k: float("nan") for k in FEATURE_NAMES}
+    out = {k: float("nan") for k in FEATURE_NAMES + PHASOR_NAMES}
     out.update(n_used=0, duration=float(t[-1] - t[0]) if n > 1 else 0.0, torque_source="none", notes=notes)
     if n < 20:
         notes.append(f"only {n} samples")
@@ -214,6 +218,7 @@ def block_features(
         if harm:
             for k in (1, 2, 4):
                 out[f"ke_{k}x"] = float(np.hypot(c[f"s{k}"], c[f"c{k}"]))
+                out[f"ke_{k}x_s"], out[f"ke_{k}x_c"] = float(c[f"s{k}"]), float(c[f"c{k}"])
     out["HF_MTW_IF"] = out.get(cfg.hf_name, float("nan"))
 
     # current-speed gain, temperature-compensated
@@ -351,12 +356,22 @@ def mission_observation(windows) -> dict:
 
     ``windows``: the mission's window rows, either :func:`block_features` dicts
     (keys ``HF_MTW_IF``, ...) or the onboard node's published rows (keys
-    ``feat.HF_MTW_IF``, ...). Every feature of :data:`FEATURE_NAMES` is the
-    median of its finite window values (robust to windows with too little
-    rotation, dropouts or transients), except the exposures of
-    :data:`SUM_FEATURES`: ``W_load`` [J] is the sum over the windows (the
-    mission's Archard load-sliding integral). NaN where no window has a value.
-    Also ``n_windows`` and ``n_windows_hf`` (windows with a finite ``HF_MTW_IF``).
+    ``feat.HF_MTW_IF``, ...).
+
+    * Kinematic-error orders ``ke_1x``, ``ke_2x``, ``ke_4x`` [rad]: synchronous
+      (coherent) average over the windows, ``|mean_w (a_k + i b_k)|`` from the
+      window phasors :data:`PHASOR_NAMES` (``theta_m`` is absolute, so the order
+      keeps its phase across windows while the noise does not): the noise and
+      the Rayleigh bias of short-window amplitudes fall with the number of
+      windows, as in a whole-mission fit. ``HF_MTW_IF`` is the coherent value of
+      the order it equals in the rows (``ke_2x`` by default). Rows without
+      phasors (older onboard versions): median of the window amplitudes.
+    * Exposures :data:`SUM_FEATURES`: ``W_load`` [J] is the sum over the windows
+      (the mission's Archard load-sliding integral).
+    * Every other feature: median of its finite window values.
+
+    NaN where no window has a value. Also ``n_windows`` and ``n_windows_hf``
+    (windows with a finite ``HF_MTW_IF``).
     """
     rows = list(windows)
     for i, r in enumerate(rows):
@@ -372,15 +387,25 @@ def mission_observation(windows) -> dict:
         return v
 
     out: dict = {}
-    for k in FEATURE_NAMES:
-        v = col(k)
+    cols = {k: col(k) for k in FEATURE_NAMES}
+    for k, v in cols.items():
         v = v[np.isfinite(v)]
         if not len(v):
             out[k] = float("nan")
         else:
             out[k] = float(np.sum(v)) if k in SUM_FEATURES else float(np.median(v))
-        if k == "HF_MTW_IF":
-            out["n_windows_hf"] = int(len(v))
+    hf = cols["HF_MTW_IF"]
+    out["n_windows_hf"] = int(np.isfinite(hf).sum())
+    for k in (1, 2, 4):
+        a, b = col(f"ke_{k}x_s"), col(f"ke_{k}x_c")
+        ok = np.isfinite(a) & np.isfinite(b)
+        if ok.any():
+            coh = float(np.hypot(a[ok].mean(), b[ok].mean()))
+            amp = cols[f"ke_{k}x"]
+            same = np.isfinite(hf) & (hf == amp)
+            out[f"ke_{k}x"] = coh
+            if same.any() and same.sum() == np.isfinite(hf).sum():
+                out["HF_MTW_IF"] = coh
     out["n_windows"] = len(rows)
     return out
 

@@ -116,7 +116,7 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
     from hd_onboard import features as _feat
 
     key = [[str(b), b.stat().st_size, b.stat().st_mtime_ns] for b in bags] + [
-        include_truth, list(_feat.FEATURE_NAMES), f"mission_observation of {OBS_WINDOW_S} s onboard windows"]
+        include_truth, list(_feat.FEATURE_NAMES), f"mission_observation v2 (coherent orders) of {OBS_WINDOW_S} s onboard windows"]
     if cache and Path(cache).exists():
         try:
             d = json.loads(Path(cache).read_text())
