@@ -20,7 +20,11 @@ build the twin's input identically.
   [rad^2] and ``phi^3`` [rad^3] of the twist: with them the linear skip path
   represents a hardening torsion law (the catalogue K1/K2/K3 curve, or
   k1 phi + k3 phi^3, PHYSICS.md 2.1) exactly, instead of leaving an S-shaped
-  bias for the LSTM to learn. All features are causal, so the
+  bias for the LSTM to learn. Likewise the friction shapes: ``sgn(omega_m)``
+  (regularised, tanh(omega_m / OMEGA_EPS); Coulomb friction of the wave
+  generator, N T_C at the output) and ``|tau_m| sgn(omega_m)`` [N*m] (the
+  load-dependent meshing loss: efficiency below 1 in driving, above in
+  back-driving, PHYSICS.md 2.5), both linear in those features. All features are causal, so the
   streaming runtime computes them sample by sample (carrying one previous row).
 * Pre-processing (:func:`preprocess`): optional anti-alias filter (causal
   Butterworth, second-order sections, applied identically in batch and
@@ -63,7 +67,11 @@ FEATURES = (
     "alpha_f_bd",
     "phi_abs_phi",
     "phi_cubed",
+    "sgn_omega_m",
+    "abs_tau_sgn_omega_m",
 )
+#: Width [rad/s] of the regularised sign tanh(omega_m / OMEGA_EPS) of the friction features.
+OMEGA_EPS = 0.05
 #: The 13 features of hd_twin/1 models trained before the torsion-law features
 #: existed; such models keep working (the feature list is stored in config.json).
 FEATURES_V1 = FEATURES[:13]
@@ -119,6 +127,7 @@ def features(X: np.ndarray, N: float, dt: float, prev: np.ndarray | None = None,
     w_prev = X[:1, [1, 4]] if prev is None else np.asarray(prev, dtype=np.float64)[None, [1, 4]]
     acc = np.diff(np.vstack([w_prev, X[:, [1, 4]]]), axis=0) / dt  # causal backward differences
     phi = th_f - th_m / N
+    sgn_w = np.tanh(w_m / OMEGA_EPS)
     F = np.column_stack(
         [
             phi,
@@ -136,6 +145,8 @@ def features(X: np.ndarray, N: float, dt: float, prev: np.ndarray | None = None,
             acc[:, 1],
             phi * np.abs(phi),
             phi**3,
+            sgn_w,
+            np.abs(tau) * sgn_w,
         ]
     )
     if names is not None and tuple(names) != FEATURES:

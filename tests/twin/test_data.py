@@ -126,6 +126,10 @@ def test_torsion_law_features_and_older_feature_sets():
         A = A / np.abs(A).max(axis=0)
         return np.linalg.lstsq(A, T, rcond=None)[1][0]
     assert fit_res(F[:, [0, j2, j3]]) < 0.05 * fit_res(F[:, [0]])
+    # friction shapes: regularised sign of omega_m and the load-dependent meshing loss
+    js, jt = D.FEATURES.index("sgn_omega_m"), D.FEATURES.index("abs_tau_sgn_omega_m")
+    np.testing.assert_allclose(F[:, js], np.tanh(X[:, 1] / D.OMEGA_EPS), rtol=1e-12)
+    np.testing.assert_allclose(F[:, jt], np.abs(X[:, 2]) * F[:, js], rtol=1e-12)
     # selection by name: the pre-existing 13-feature models keep their columns
     F13 = D.features(X, N, 1 / m.fs, names=D.FEATURES_V1)
     np.testing.assert_array_equal(F13, F[:, :13])
