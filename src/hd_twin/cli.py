@@ -59,6 +59,11 @@ def _cfg_from_args(args) -> "object":
         over["ramp_epochs"] = 0
     if args.fixed_lambda:
         over["lambda_mode"] = "fixed"
+    feats = getattr(args, "features", None)
+    if feats:
+        from .data import FEATURES_V1
+
+        over["features"] = list(FEATURES_V1) if feats == "v1" else [f.strip() for f in feats.split(",") if f.strip()]
     over.update(_model_config(args.model_config))
     return TrainConfig.from_preset(args.preset, **over)
 
@@ -78,6 +83,8 @@ def _add_train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-ramp", action="store_true", help="switch off the physics ramp")
     p.add_argument("--fs-model", type=float, help="model sample rate [Hz] (0 = the bags' rate)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--features", help="network input features, comma-separated names of hd_twin.data.FEATURES "
+                   "(default all); 'v1' = the 13 features of models before the torsion/friction features")
     p.add_argument("--model-config", help="JSON/YAML with declared_effects, extra_terms, params, model_version")
 
 

@@ -91,6 +91,7 @@ class TrainConfig:
     export_onnx: bool = True
     plots: bool = True
     device: str = "auto"  # "auto" (CUDA when available), "cpu", "cuda"
+    features: list[str] = field(default_factory=lambda: list(D.FEATURES))  # network inputs (names of hd_twin.data)
 
     @classmethod
     def from_preset(cls, name: str, **overrides) -> "TrainConfig":
@@ -110,6 +111,9 @@ class TrainConfig:
         if self.washout >= self.seq_len - 2:
             raise ValueError(f"training config: washout {self.washout} leaves nothing of seq_len {self.seq_len}")
         ph.check_effects(self.declared_effects)
+        if not self.features:
+            raise ValueError("training config: features must name at least one feature")
+        D.feature_columns(self.features)
         if not isinstance(self.extra_terms, list) or not all(isinstance(t, dict) for t in self.extra_terms):
             raise ValueError("training config: extra_terms must be a list of term dicts")
         return self
@@ -342,7 +346,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     for k, i in enumerate(list(tr_idx) + list(va_idx)):
         if progress:
             print(f"{_CR}pre-processing {k + 1}/{len(tr_idx) + len(va_idx)}", end="" if _CR else "\n", file=sys.stderr, flush=True)
-        segs_by_m[i] = D.preprocess(missions[i], fs_model, T_ref=params.T_ref)
+        segs_by_m[i] = D.preprocess(missions[i], fs_model, T_ref=params.T_ref, names=cfg.features)
     if progress:
         print(file=sys.stderr)
     t_pre = time.perf_counter() - t0
@@ -351,11 +355,11 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     va_segs = [s for i in va_idx for s in segs_by_m[i]]
     if not tr_segs or not va_segs:
         raise ValueError("no usable segment in the training or the validation missions")
-    norm = D.Normalizer.fit(tr_segs)
+    norm = D.Normalizer.fit(tr_segs, cfg.features)
     Wtr = stack_windows(tr_segs, norm, cfg.seq_len, cfg.stride)
     Wva = stack_windows(va_segs, norm, cfg.seq_len, cfg.seq_len)
 
-    net = TwinLSTM(len(D.FEATURES), len(D.OUTPUTS), cfg.hidden, cfg.layers, cfg.dropout, cfg.skip)
+    net = TwinLSTM(len(cfg.features), len(D.OUTPUTS), cfg.hidden, cfg.layers, cfg.dropout, cfg.skip)
     lcfg = LossConfig(lambda_mode=cfg.lambda_mode, lambda_init=cfg.lambda_init, adaptive_scaling=cfg.adaptive_scaling,
                       ramp_epochs=cfg.ramp_epochs, washout=cfg.washout)
     pinn = PINN(net, params, cfg.declared_effects, norm.q_mean, norm.q_std, lcfg, cfg.extra_terms,
@@ -431,7 +435,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         "model_version": cfg.model_version,
         "parent": cfg.parent,
         "inputs": list(D.RAW_INPUTS),
-        "features": list(D.FEATURES),
+        "features": list(cfg.features),
         "outputs": list(D.OUTPUTS),
         "output_scales": {k: list(v) for k, v in pinn.output_scales().items()},
         "declared_effects": list(cfg.declared_effects),

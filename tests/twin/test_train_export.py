@@ -83,6 +83,23 @@ def test_streaming_decimation_matches_batch(fleet, tmp_path):
     np.testing.assert_allclose(q, ref, rtol=0, atol=1e-5 * np.max(np.abs(ref)))
 
 
+def test_model_with_an_older_feature_set_streams_and_evaluates(fleet, tmp_path):
+    """A model trained on the 13 features of hd_twin/1 keeps them in batch eval and in the streaming runtime."""
+    from hd_twin.runtime import StreamingTwin
+
+    train_twin(fleet, tmp_path, TrainConfig.from_preset("tiny", epochs=1, plots=False, features=list(D.FEATURES_V1)),
+               progress=False)
+    pinn, norm, cfg = load_pinn(tmp_path)
+    assert cfg["features"] == list(D.FEATURES_V1) and pinn.net.n_in == 13
+    m = synth_mission("EMA-OLD", 0, seed=31, duration=2.0)
+    ref = predict_segments(pinn, D.preprocess(m, cfg["preprocessing"]["fs_model"], names=cfg["features"]), norm)[0]
+    q = StreamingTwin(tmp_path, fs_in=m.fs).step(D.mission_inputs(m))["Q_red"]
+    np.testing.assert_allclose(q, ref, rtol=0, atol=1e-5 * np.max(np.abs(ref)))
+    assert np.isfinite(eval_model(tmp_path, [m])["nrmse_pct"])
+    with pytest.raises(ValueError, match="unknown twin feature"):
+        TrainConfig.from_preset("tiny", features=["phi", "backlash"]).validate()
+
+
 def test_determinism_by_seed(fleet, tmp_path):
     cfg = TrainConfig.from_preset("tiny", epochs=1, plots=False, export_onnx=False, seed=3)
     a = train_twin(fleet, None, cfg, progress=False)
