@@ -167,14 +167,14 @@ def test_record_split_per_mission_across_processes(tmp_path, domain_id):
     node = Node("test_replay", context=ctx)
     try:
         rep = Replayer(node, "max")
-        end = time.monotonic() + 30
-        while time.monotonic() < end and rep.pubs[ru.TOPIC_JOINT_STATES].get_subscription_count() == 0:
+        end = time.monotonic() + 30  # the recorder subscribes to each topic once it discovers its publisher
+        while time.monotonic() < end and any(p.get_subscription_count() == 0 for p in rep.pubs.values()):
             time.sleep(0.05)
         for b in bags:
             rep.play(b)
         for p in rep.pubs.values():
             p.wait_for_all_acked()
-        time.sleep(1.0)
+        time.sleep(3.0)  # acked = in the recorder's DDS history; give its callbacks time to file them
     finally:
         node.destroy_node()
         import rclpy
