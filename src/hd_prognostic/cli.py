@@ -221,6 +221,19 @@ def _guard(fn):
     return run
 
 
+def _add_population_args(p) -> None:
+    """Options of the observation-model / prior fit, shared by ``prognostic eval`` and ``fit-obs``."""
+    p.add_argument("--feature", default="HF_MTW_IF")
+    p.add_argument("--degree", type=int, default=2)
+    p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
+    p.add_argument("--baseline", choices=("subtract", "ratio", "none", "state"), default="subtract",
+                   help="per-unit feature offset: median of the first missions subtracted (default) or "
+                        "estimated jointly with the wear (state)")
+    p.add_argument("--joint", action="store_true",
+                   help="joint estimator: offset state, Liu-West kernel, h = kappa U, predictive kappa prior "
+                        "(better wear tracking; RUL accuracy not better, see the README)")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("prognose", help="particle-filter RUL history of one actuator's bags")
     p.add_argument("bag_dir", help="folder with one actuator's mission bags (*.mcap)")
@@ -247,19 +260,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--folds", type=int, default=4)
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--feature", default="HF_MTW_IF")
-    p.add_argument("--degree", type=int, default=2)
+    _add_population_args(p)
     p.add_argument("--likelihood", choices=("gaussian", "student_t"), default="student_t")
     p.add_argument("--no-ukf", action="store_true", help="skip the UKF baseline")
     p.add_argument("--fuse", default=None, metavar="F1,F2,...",
                    help="fuse these features into one health index (wear regression on the training actuators)")
-    p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
-    p.add_argument("--baseline", choices=("subtract", "ratio", "none", "state"), default="subtract",
-                   help="per-unit feature offset: median of the first missions subtracted (default) or "
-                        "estimated jointly with the wear (state)")
-    p.add_argument("--joint", action="store_true",
-                   help="joint estimator: offset state, Liu-West kernel, h = kappa U, predictive kappa prior "
-                        "(better wear tracking; RUL accuracy not better, see the README)")
     p.set_defaults(func=_guard(_eval))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")
@@ -269,15 +274,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = s.add_parser("fit-obs", help="fit the observation model + Archard prior on a training fleet")
     p.add_argument("fleet_dir")
     p.add_argument("--out", required=True, help="JSON to write")
-    p.add_argument("--feature", default="HF_MTW_IF")
-    p.add_argument("--degree", type=int, default=2)
-    p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
-    p.add_argument("--baseline", choices=("subtract", "ratio", "none", "state"), default="subtract",
-                   help="per-unit feature offset: median of the first missions subtracted (default) or "
-                        "estimated jointly with the wear (state)")
-    p.add_argument("--joint", action="store_true",
-                   help="joint estimator: offset state, Liu-West kernel, h = kappa U, predictive kappa prior "
-                        "(better wear tracking; RUL accuracy not better, see the README)")
+    _add_population_args(p)
     p.add_argument("--cache", default="runs/prognostic_cache", help="per-actuator feature cache folder")
     p.add_argument("--fuse", default=None, metavar="F1,F2,...",
                    help="fuse these features into one health index (wear regression on the training actuators)")
