@@ -674,6 +674,8 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
     final row of every mission, the wall time and the replay speed-up over
     real time.
     """
+    from hdphm import rosutil as ru
+
     overrides = {k: dict(v) for k, v in (overrides or {}).items()}
     if model_dir:
         overrides.setdefault("twin", {})["model_dir"] = str(model_dir)
@@ -695,6 +697,11 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
                 raise ValueError(f"ground analysis of {archive_dir} failed: {gr.error}")
             st.spin_for(0.3)
         rep = Replayer(st.aux, rate, pump=st.pump, tap=st.recorder.tap if st.recorder else None)
+        # the replay's publishers are new: wait until DDS discovery has matched the onboard
+        # subscription, or a max-speed replay on a loaded machine loses its first samples
+        end = time.monotonic() + 15.0
+        while time.monotonic() < end and rep.pubs[ru.TOPIC_JOINT_STATES].get_subscription_count() == 0:
+            st.ex.spin_once(timeout_sec=0.02)
         t0 = time.perf_counter()
         it = bags
         if progress:

@@ -96,8 +96,13 @@ def test_missing_topic_nan_dropout_disorder_twin_update_restart(bags, domain_id)
             if k == 5500:  # twin update mid-mission
                 upd.publish(ru.json_msg({"params": {"T_C": 0.1001}, "updated_by": "test"}))
             if k == 6000:  # onboard restarted mid-replay
+                pub = rep.pubs[ru.TOPIC_JOINT_STATES]
                 st.remove("onboard")
+                _pump_until(st, lambda: pub.get_subscription_count() == 0, 5.0)
                 st.add("onboard", {"stale_timeout_s": 0.5})
+                # a max-speed replay would otherwise finish before DDS discovery matches
+                # the new subscription (seen on a loaded CI machine: 0 messages received)
+                assert _pump_until(st, lambda: pub.get_subscription_count() >= 1, 15.0)
             return pay
 
         rep = Replayer(st.aux, "max", pump=st.pump)
