@@ -52,14 +52,17 @@ from typing import Any
 
 import numpy as np
 
-from hd_onboard.detector import ERROR, OK, WARN, ChannelDetector, ChannelThreshold, LevelLatch
+from hd_onboard.detector import (ERROR, OK, WARN, ChannelDetector, ChannelThreshold, LevelLatch, StiffnessMonitor,
+                                  StiffnessReference, fit_stiffness_reference)
 from hd_onboard.expected import I_REF, I_TEMP, PhysicsStandInExpected
 from hd_twin import physics as ph
 
 JS_COLS = ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red")
 CHANNELS = ("Q_red", "twist")
 #: columns of the residual table published on /hd/onboard/residuals
-RESIDUAL_COLUMNS = ("stamp", "Q_red", "Q_red_hat", "r_Q_red", "e_Q_red", "r_twist", "e_twist", "level")
+#: (``stiff_loss``: torsional-stiffness loss estimate 1 - 1/s of :class:`hd_onboard.detector.StiffnessMonitor`, NaN
+#: where not evaluable)
+RESIDUAL_COLUMNS = ("stamp", "Q_red", "Q_red_hat", "r_Q_red", "e_Q_red", "r_twist", "e_twist", "level", "stiff_loss")
 #: residual statistics per window and channel
 STAT_NAMES = ("mean", "std", "rms", "max_abs_e", "frac_warn", "n_valid")
 
@@ -81,10 +84,19 @@ class OnboardConfig:
     default_h_error: float = 6.0
     warn_margin: float = 1.5
     error_margin: float = 3.0
+    # torsional-stiffness monitor (hd_onboard.detector.StiffnessMonitor); reference law learnt on the warm-up
+    stiff_tau_s: float = 2.0  # s, forgetting time constant of the twist-vs-torque regression
+    stiff_loss_warn: float = 0.08  # -, fraction of effective torsional stiffness lost -> WARN
+    stiff_loss_error: float = 0.2  # -, -> ERROR
+    stiff_persistence_s: float = 0.5  # s of consecutive evaluable samples above the line
+    stiff_min_excitation: float = 0.4  # -, loaded-window gate: weighted std of g(Q) / the reference's
+    stiff_eps_omega: float = 1.0  # rad/s, direction term tanh(omega_m / eps)
 
     def validate(self) -> "OnboardConfig":
         for k in ("window_s", "ewma_tau_s", "persistence_s", "hold_s", "warmup_s", "default_h_warn",
-                  "default_h_error", "warn_margin", "error_margin", "accel_cutoff_hz"):
+                  "default_h_error", "warn_margin", "error_margin", "accel_cutoff_hz", "stiff_tau_s",
+                  "stiff_loss_warn", "stiff_loss_error", "stiff_persistence_s", "stiff_min_excitation",
+                  "stiff_eps_omega"):
             v = getattr(self, k)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"onboard parameter {k} = {v!r} must be a positive finite number")
@@ -92,6 +104,9 @@ class OnboardConfig:
             raise ValueError(f"onboard parameters settle_s={self.settle_s}, max_gap_samples={self.max_gap_samples} are absurd")
         if self.window_s > 3600 or self.ewma_tau_s > 3600:
             raise ValueError("onboard window_s / ewma_tau_s above one hour are absurd")
+        if not (self.stiff_loss_warn <= self.stiff_loss_error < 1.0 and self.stiff_min_excitation <= 10):
+            raise ValueError(f"onboard parameters stiff_loss_warn={self.stiff_loss_warn}, stiff_loss_error="
+                             f"{self.stiff_loss_error} need warn <= error < 1; stiff_min_excitation <= 10")
         if not (self.nominal_fs == 0 or 10 <= self.nominal_fs <= 1e5):
             raise ValueError(f"onboard parameter nominal_fs = {self.nominal_fs} Hz outside 10..1e5 (0 = estimate)")
         return self
@@ -185,6 +200,7 @@ class OnboardCore:
         self.defer_windows = False  # True: closed windows wait in window_jobs for window_row()
         self.window_jobs: list[WindowJob] = []
         self._given_thresholds = dict(thresholds or {})
+        self._given_stiff_ref: StiffnessReference | None = None
         self.reset_mission()
 
     # ---- configuration -----------------------------------------------------
@@ -200,6 +216,33 @@ class OnboardCore:
         self.params = params.with_meta(gear_ratio=self.params.N)
         if hasattr(self.expected, "set_params"):
             self.expected.set_params(self.params)
+
+    def set_stiffness_reference(self, ref: "StiffnessReference | dict | None") -> None:
+        """Healthy torsion law given by the ground (None: learn it on each mission's warm-up again).
+
+        Takes effect at the next mission start (the encoder offset ``a`` is re-estimated on
+        that mission's warm-up); a dict is validated (:meth:`StiffnessReference.from_dict`).
+        """
+        if isinstance(ref, dict):
+            ref = StiffnessReference.from_dict(ref, "onboard stiffness reference")
+        self._given_stiff_ref = ref
+
+    def stiffness_status(self) -> dict[str, Any]:
+        """State of the stiffness monitor for ``/diagnostics`` (``hdphm/onboard/stiffness``).
+
+        ``level`` (OK/WARN/ERROR, persistence applied), ``loss`` (last evaluable stiffness loss
+        1 - 1/s, -), ``compliance_ratio`` s, ``loss_warn``/``loss_error``, ``n_eval`` (evaluable
+        samples this mission), ``reference`` (source, or "learning" during the warm-up, or
+        "none" when the warm-up defined no torsion law: too little load variation), the
+        reference's secant ``compliance`` [rad/(N*m)] and load range ``q_range`` [N*m].
+        """
+        sm = self.stiffness
+        r = sm.ref
+        return {"level": sm.level(), "loss": sm.loss, "compliance_ratio": sm.s, "loss_warn": sm.loss_warn,
+                "loss_error": sm.loss_error, "n_eval": sm.n_eval,
+                "reference": (r.source if r is not None else ("learning" if self._twist_zero is None else "none")),
+                "compliance": r.compliance if r is not None else math.nan,
+                "q_range": r.q_range if r is not None else math.nan}
 
     @property
     def thresholds(self) -> dict[str, ChannelThreshold]:
@@ -241,6 +284,10 @@ class OnboardCore:
         self.rows = _Buf(len(RESIDUAL_COLUMNS), 256)
         self.events: list[tuple[int, int, str]] = []
         self.windows: list[dict[str, Any]] = []
+        self.stiffness = StiffnessMonitor(cfg.stiff_tau_s, cfg.stiff_loss_warn, cfg.stiff_loss_error, 1,
+                                          cfg.stiff_min_excitation)
+        self._stiff_warm = _Buf(3, 8192)  # (twist_raw, Q, omega_m) of the warm-up
+        self._configure_rates()
         self._x1 = np.full(7, np.nan)
         self._es1 = {c: math.nan for c in CHANNELS}
 
@@ -250,6 +297,10 @@ class OnboardCore:
         pers = max(1, int(round(self.cfg.persistence_s * fs)))
         for d in self.detectors.values():
             d.lam, d.persistence = lam, pers
+        sm = getattr(self, "stiffness", None)
+        if sm is not None:
+            sm.set_rate(fs)
+            sm.persistence = max(1, int(round(self.cfg.stiff_persistence_s * fs)))
 
     def push_temperature(self, stamp_ns: int, value: float) -> None:
         """A temperature sample [degC] (the gearbox frame is preferred by the caller)."""
@@ -352,14 +403,20 @@ class OnboardCore:
         Q_meas = V[:, 5]
         r_Q = Q_meas - Q_hat
         Q_for_twist = np.where(np.isfinite(Q_meas), Q_meas, Q_hat)
-        twist = (V[:, 1] - V[:, 0] / self.params.N) - Q_for_twist / self.params.K_out
+        twist_raw = V[:, 1] - V[:, 0] / self.params.N
+        twist = twist_raw - Q_for_twist / self.params.K_out
         # not evaluated: settle_s after each reset (per sample: a reset late in the block masks only what follows it)
         settle = np.maximum(settle_before, np.maximum.accumulate(np.where(reset_at, t + cfg.settle_s, -np.inf)))
         evaluate = valid & (t >= settle)
         r_Q = np.where(evaluate, r_Q, np.nan)
         twist = np.where(evaluate, twist, np.nan)
+        twist_raw = np.where(evaluate, twist_raw, np.nan)
         # twist zero over the warm-up
         if self._twist_zero is None:
+            wm_ = t < cfg.warmup_s
+            self._stiff_warm.extend(np.column_stack([twist_raw[wm_], Q_for_twist[wm_], V[wm_, 2]]))
+            if t[-1] >= cfg.warmup_s:
+                self._stiffness_reference()
             self._twist_warm.extend(twist[t < cfg.warmup_s])
             if t[-1] >= cfg.warmup_s:
                 w = self._twist_warm.take()
@@ -386,6 +443,16 @@ class OnboardCore:
             es[c] = np.where(np.isfinite(r), e, np.nan)
             cw |= w_ & np.isfinite(r)
             ce |= e_ & np.isfinite(r)
+        # torsional stiffness (after the warm-up that gave its reference)
+        stiff = np.full(n, np.nan)
+        sw = np.zeros(n, bool)
+        if self.stiffness.ref is not None:
+            after = t >= cfg.warmup_s
+            if after.any():
+                stiff[after], sw[after], se_ = self.stiffness.step(twist_raw[after], Q_for_twist[after], V[after, 2],
+                                                                   evaluate[after])
+                cw |= sw
+                ce[after] |= se_
         lev = self.latch.step(t, cw, ce)
         events = []
         if len(lev):
@@ -393,11 +460,13 @@ class OnboardCore:
             rises = np.flatnonzero(np.diff(np.concatenate([[prev_level], lev]).astype(int)) > 0)
             for i in rises:
                 which = [c for c in CHANNELS if np.isfinite(es[c][i]) and abs(es[c][i]) > self.detectors[c].threshold.h_warn]
+                if sw[i]:
+                    which.append("stiffness")
                 events.append((int(stamps_ns[i]), int(lev[i]), ",".join(which) or "held"))
                 if self.onset_ns is None:
                     self.onset_ns = int(stamps_ns[i])
             self.level = int(lev[-1])
-        table = np.column_stack([stamps_ns * 1e-9, Q_meas, Q_hat, r_Q, es["Q_red"], r_tw, es["twist"], lev.astype(float)])
+        table = np.column_stack([stamps_ns * 1e-9, Q_meas, Q_hat, r_Q, es["Q_red"], r_tw, es["twist"], lev.astype(float), stiff])
         self.last_ns = int(stamps_ns[-1])
         # 8. windows
         windows = self._windows(t, stamps_ns, table, V, evaluate)
@@ -407,6 +476,19 @@ class OnboardCore:
         self.expected.reset()
         self.health.n_resets += 1
         self._settle_until = t_s + self.cfg.settle_s
+
+    def _stiffness_reference(self) -> None:
+        """End of the warm-up: the healthy torsion law (learnt, or the ground's with this mission's offset)."""
+        w = self._stiff_warm.take()
+        cfg = self.cfg
+        if self._given_stiff_ref is not None:
+            r = self._given_stiff_ref
+            ok = np.isfinite(w).all(axis=1)
+            if ok.sum() >= 50:
+                off = w[ok, 0] - r.g(w[ok, 1]) - r.b * np.tanh(w[ok, 2] / r.eps)
+                self.stiffness.ref = StiffnessReference.from_dict({**r.to_dict(), "a": float(np.median(off))})
+            return
+        self.stiffness.ref = fit_stiffness_reference(w[:, 0], w[:, 1], w[:, 2], cfg.stiff_eps_omega)
 
     def _self_calibrate(self, t: np.ndarray, res: dict[str, np.ndarray]) -> None:
         """Lines from the first ``warmup_s`` of the mission (used only when the ground gave none)."""
@@ -516,11 +598,14 @@ class OnboardCore:
         h[0], h[1], h[2], h[3], h[4], h[5] = tm, tf, wm, wf, tau, Q
         p = self.params
         r_Q = Q - Q_hat  # NaN when Q_red is not measured
-        twist = (tf - tm / p.N) - (Q if Q == Q else Q_hat) / p.K_out
+        Qt = Q if Q == Q else Q_hat
+        tw_raw = tf - tm / p.N
+        twist = tw_raw - Qt / p.K_out
         if t < self._settle_until:
-            r_Q = twist = math.nan
+            r_Q = twist = tw_raw = math.nan
         if self._twist_zero is None:  # warm-up (t < warmup_s here)
             self._twist_warm.append(twist)
+            self._stiff_warm.append((tw_raw, Qt, wm))
             r_tw = math.nan
         else:
             r_tw = math.nan if t < cfg.warmup_s else twist - self._twist_zero
@@ -541,14 +626,22 @@ class OnboardCore:
                 lev_e = lev_e or e_
             else:
                 es[c] = math.nan
+        stiff = math.nan
+        s_w = False
+        if self.stiffness.ref is not None and t >= cfg.warmup_s:
+            stiff, s_w, s_e = self.stiffness.step_one(tw_raw, Qt, wm)
+            lev_w = lev_w or s_w
+            lev_e = lev_e or s_e
         lev = self.latch.step_one(t, lev_w, lev_e)
         if lev > self.level:
             which = [c for c in CHANNELS if es[c] == es[c] and abs(es[c]) > self.detectors[c].threshold.h_warn]
+            if s_w:
+                which.append("stiffness")
             self.events.append((int(stamp_ns), int(lev), ",".join(which) or "held"))
             if self.onset_ns is None:
                 self.onset_ns = int(stamp_ns)
         self.level = lev
-        row = (stamp_ns * 1e-9, Q, Q_hat, r_Q, es["Q_red"], r_tw, es["twist"], float(lev))
+        row = (stamp_ns * 1e-9, Q, Q_hat, r_Q, es["Q_red"], r_tw, es["twist"], float(lev), stiff)
         self.rows.append(row)
         self.last_ns = stamp_ns
         wi = math.floor(t / cfg.window_s)
@@ -612,6 +705,12 @@ def window_row(job: WindowJob, feature_fn=None, core=None) -> dict[str, Any] | N
             for s in ("mean", "std", "rms", "max_abs_e", "frac_warn"):
                 row[f"{c}.{s}"] = math.nan
         row[f"{c}.n_valid"] = float(nv)
+    if tab.shape[1] > 8:  # torsional-stiffness loss (-): mean and max over the window's evaluable samples
+        sl = tab[:, 8]
+        sl = sl[np.isfinite(sl)]
+        row["stiffness.loss"] = float(sl.mean()) if len(sl) else math.nan
+        row["stiffness.max_loss"] = float(sl.max()) if len(sl) else math.nan
+        row["stiffness.n_eval"] = float(len(sl))
     if feature_fn is not None:
         try:
             feats = feature_fn(tab[:, 0], raw, job.temperature)
