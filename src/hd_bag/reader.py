@@ -458,7 +458,16 @@ def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
         raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, f"sample rate {fs:.4g} Hz (median stamp step) is "
                                      f"outside the contract's {RATE_RANGE[0]:g} Hz to {RATE_RANGE[1]:g} Hz"))
         rep.notes.append(f"sample rate {fs:.4g} Hz is outside the contract range; read anyway")
-    missing = np.rint(d / dt_ns).astype(np.int64) - 1
+    # A step is a dropout when it exceeds 1.5 periods *and* is beyond the stamp jitter: with
+    # heavy jitter (e.g. +-30 % of the period, steps spread 0.4..1.6 periods) a 1.6-period step
+    # is jitter, not a lost sample. Jitter scale: robust sigma (1.4826 MAD) of the steps.
+    jit_ns = 1.4826 * float(np.median(np.abs(d - dt_ns)))
+    is_gap = (d > 1.5 * dt_ns) & (d - dt_ns > 3.0 * jit_ns)
+    missing = np.where(is_gap, np.maximum(np.rint(d / dt_ns).astype(np.int64) - 1, 1), 0)
+    if jit_ns > 0.05 * dt_ns:
+        rep.notes.append(f"header.stamp jitter {jit_ns / dt_ns:.0%} of the {dt * 1e3:.4g} ms period (robust "
+                         f"sigma of the steps): steps up to {(dt_ns + 3.0 * jit_ns) / dt_ns:.2f} periods read "
+                         "as jitter, not dropouts")
     gi = np.nonzero(missing >= 1)[0]
     rep.gaps = [(int(i + 1), int(missing[i])) for i in gi]
     big = missing > MAX_INTERP_GAP_SAMPLES
