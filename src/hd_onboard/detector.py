@@ -454,3 +454,39 @@ class StiffnessMonitor:
         if self.run_warn >= self.persistence:
             return WARN
         return OK
+
+
+def calibrate_channel(r: np.ndarray, *, fs: float, ewma_tau_s: float, persistence_s: float, warn_margin: float,
+                      error_margin: float, min_h_warn: float, min_h_error: float, sigma_floor: float = 0.0,
+                      source: str = "self-calibrated (mission warm-up)", min_samples: int = 200) -> ChannelThreshold | None:
+    """Lines of one channel from one healthy residual segment ``r`` (NaN allowed), with a scale floor.
+
+    ``mu`` = median, ``sigma = max(1.4826 MAD, sigma_floor)`` (channel unit), then the
+    persistent peak of the EWMA of ``(r - mu)/sigma`` (after one time constant) and
+    ``h_warn = max(min_h_warn, warn_margin peak)``, ``h_error = max(min_h_error,
+    error_margin peak, 1.5 h_warn)``: the arithmetic of ``hd_ground.thresholds.channel_threshold``
+    plus the floor. The floor is what a short warm-up cannot show: the twin's error on
+    manoeuvres the warm-up did not contain (the onboard core sets it from the load range
+    seen, see ``OnboardConfig.sigma_floor_rel``). None with fewer than ``min_samples`` finite values.
+    """
+    from hd_ground.thresholds import persistent_peak
+
+    r = np.asarray(r, float)
+    fin = r[np.isfinite(r)]
+    if len(fin) < min_samples:
+        return None
+    mu = float(np.median(fin))
+    sigma = float(1.4826 * np.median(np.abs(fin - mu)))
+    if not sigma > 0:
+        sigma = float(np.std(fin)) or 1e-12
+    if math.isfinite(sigma_floor) and sigma_floor > sigma:
+        sigma = float(sigma_floor)
+        source += f", sigma floor"
+    lam = min(1.0, 1.0 / (ewma_tau_s * fs))
+    e = ewma((r - mu) / sigma, lam, 0.0)
+    e = np.where(np.isfinite(r), np.abs(e), np.nan)
+    e[: int(ewma_tau_s * fs)] = np.nan
+    peak = persistent_peak(e, max(1, int(round(persistence_s * fs))))
+    h_warn = max(min_h_warn, warn_margin * peak)
+    h_error = max(min_h_error, error_margin * peak, 1.5 * h_warn)
+    return ChannelThreshold(mu, sigma, float(h_warn), float(h_error), source).validate("self-calibration")

@@ -58,6 +58,11 @@ def _margins(res: dict, core: OnboardCore) -> dict[str, float]:
         e = np.abs(tab[:, col])
         e = e[np.isfinite(e)]
         out[c] = float(e.max() / core.thresholds[c].h_warn) if len(e) else math.nan
+    if tab.shape[1] > 8:  # stiffness: largest loss held for the persistence time / loss_warn
+        from hd_ground.thresholds import persistent_peak
+
+        sm = core.stiffness
+        out["stiffness"] = float(persistent_peak(tab[:, 8], sm.persistence) / sm.loss_warn) if np.isfinite(tab[:, 8]).any() else math.nan
     return out
 
 
@@ -194,3 +199,149 @@ def cmd_eval(args) -> int:
         plot_summary(s, out / "onboard_eval.png")
         print(f"wrote {out / 'onboard_eval.json'} and {out / 'onboard_eval.png'}")
     return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# Detection study: delay per fault type and severity, false alarms on healthy bags
+# ---------------------------------------------------------------------------------------------
+#: (fault name, severity) cases of the detection study; names of hd_sim's mid-mission faults
+DEFAULT_CASES = (("lubrication_loss", 2.0), ("lubrication_loss", 3.0),
+                 ("flexspline_stiffness_loss", 0.3), ("flexspline_stiffness_loss", 0.5),
+                 ("flexspline_stiffness_loss", 0.7))
+
+
+def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed: int = 7, seed0: int = 40,
+                    duration: float = 16.0, config: OnboardConfig | None = None, progress: bool = False) -> dict[str, Any]:
+    """Detection delay of the onboard core (physics stand-in, self-calibrated) on simulated faults.
+
+    Mission ``k`` of a case: unit ``actuator`` of the ``pop_seed`` population, seed ``seed0 + k``,
+    profile inspection, fault onset ``8 + 0.5 k`` s inside the simulator kernel (50 ms ramp).
+    The simulator is the scoring harness only: the core sees the contract signals. A flag before
+    the onset counts as a false alarm of that mission (delay not scored). Returns per case the
+    rows ``(seed, onset, first flag [s] or None, delay [s] or None, reasons)`` and a summary
+    (detected, missed, early, median / max delay).
+    """
+    import dataclasses
+
+    from hd_sim import EffectSet, sample_population, simulate_mission
+
+    cfg = (config or OnboardConfig()).validate()
+    p = sample_population(actuator + 1, seed=pop_seed)[actuator]
+    out = []
+    it = [(c, k) for c in cases for k in range(n)]
+    if progress:
+        import sys
+
+        from tqdm import tqdm
+
+        it = tqdm(it, desc="fault missions", unit="mission", file=sys.stderr)
+    rows: dict[tuple, list] = {tuple(c): [] for c in cases}
+    for (name, sev), k in it:
+        t_on, seed = 8.0 + 0.5 * k, seed0 + k
+        m, _ = simulate_mission(p, EffectSet.default(), "inspection", seed, duration=duration, mission_index=k,
+                                fault={"name": name, "severity": float(sev), "t_onset": t_on})
+        m = dataclasses.replace(m, t0_ns=1_700_000_000_000_000_000)
+        r = run_mission(m, OnboardCore(gear_ratio=m.meta.gear_ratio, config=cfg))
+        on = r["onset_s"]
+        why = r["events"][0][2] if r["events"] else ""
+        rows[(name, sev)].append((seed, t_on, on, None if on is None or on < t_on else on - t_on, why))
+    for (name, sev), rr in rows.items():
+        d = [x[3] for x in rr if x[3] is not None]
+        out.append({"fault": name, "severity": sev, "n": len(rr), "detected": len(d),
+                    "early": sum(1 for x in rr if x[2] is not None and x[2] < x[1]),
+                    "missed": sum(1 for x in rr if x[2] is None),
+                    "delay_median_s": float(np.median(d)) if d else math.nan,
+                    "delay_max_s": float(np.max(d)) if d else math.nan, "rows": rr})
+    return {"actuator": actuator, "pop_seed": pop_seed, "seed0": seed0, "duration_s": duration, "cases": out}
+
+
+def plot_study(study: dict, fa: dict | None, path: str | os.PathLike) -> None:
+    """PNG: detection delay vs severity per fault type (misses at the top), false alarms in the title."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    faults = sorted({c["fault"] for c in study["cases"]})
+    fig, axes = plt.subplots(1, len(faults), figsize=(5 * len(faults), 4), squeeze=False)
+    for ax, f in zip(axes[0], faults):
+        cs = [c for c in study["cases"] if c["fault"] == f]
+        top = max([x[3] for c in cs for x in c["rows"] if x[3] is not None] + [1.0]) * 1.3
+        for c in cs:
+            d = [x[3] for x in c["rows"] if x[3] is not None]
+            ax.scatter([c["severity"]] * len(d), d, color="C0", s=18)
+            if c["missed"] or c["early"]:
+                ax.scatter([c["severity"]], [top], marker="x", color="r", s=40)
+                ax.annotate(f"{c['missed']} missed, {c['early']} early", (c["severity"], top), fontsize=7,
+                            textcoords="offset points", xytext=(4, -10))
+        ax.set_xlabel("severity")
+        ax.set_ylabel("delay after onset [s]")
+        ax.set_title(f, fontsize=9)
+        ax.set_ylim(0, top * 1.1)
+    t = "onboard detection delay (self-calibrated, physics stand-in)"
+    if fa:
+        t += f"; false alarms {fa['missions_warn_or_worse']}/{fa['n_missions']} healthy missions"
+    fig.suptitle(t, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def study_table(study: dict, fa: dict | None = None) -> str:
+    """Markdown table of a :func:`detection_study` (and a false-alarm summary)."""
+    lines = ["| fault | severity | detected | missed | flagged before onset | median delay [s] | max delay [s] |",
+             "|---|---|---|---|---|---|---|"]
+    for c in study["cases"]:
+        lines.append(f"| {c['fault']} | {c['severity']:g} | {c['detected']}/{c['n']} | {c['missed']} | {c['early']} | "
+                     f"{c['delay_median_s']:.2f} | {c['delay_max_s']:.2f} |")
+    if fa:
+        lines.append(f"\nfalse alarms ({fa['mode']}): WARN or worse in {fa['missions_warn_or_worse']}/{fa['n_missions']} "
+                     f"healthy missions, ERROR in {fa['missions_error']}; reasons: "
+                     + ", ".join(sorted({x for r in fa["missions"] for x in r["reasons"]})) )
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    """``python -m hd_onboard.evaluate study --healthy DIR [--n 6] [--actuator 2] [--seed0 40] --out DIR``."""
+    import argparse
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m hd_onboard.evaluate",
+                                 description="onboard detection study: delay per fault and severity + false alarms")
+    ap.add_argument("what", choices=("study",))
+    ap.add_argument("--healthy", nargs="*", default=[], help="healthy bags / dirs for the false-alarm count")
+    ap.add_argument("--n", type=int, default=6, help="fault missions per case")
+    ap.add_argument("--actuator", type=int, default=2)
+    ap.add_argument("--pop-seed", type=int, default=7)
+    ap.add_argument("--seed0", type=int, default=40)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=V", help="OnboardConfig field")
+    ap.add_argument("--out", default="")
+    a = ap.parse_args(argv)
+    kw = {}
+    for kv in a.set:
+        k, _, v = kv.partition("=")
+        if k not in OnboardConfig.__dataclass_fields__:
+            print(f"unknown onboard parameter {k!r}", file=sys.stderr)
+            return 2
+        kw[k] = float(v)
+    try:
+        cfg = OnboardConfig(**kw).validate()
+        if not 1 <= a.n <= 1000:
+            raise ValueError(f"--n {a.n}: 1..1000 missions per case")
+        fa = evaluate_bags(a.healthy, config=cfg, progress=True) if a.healthy else None
+        st = detection_study(n=a.n, actuator=a.actuator, pop_seed=a.pop_seed, seed0=a.seed0, config=cfg, progress=True)
+    except ValueError as e:
+        print(f"onboard study: {e}", file=sys.stderr)
+        return 2
+    print(study_table(st, fa))
+    if a.out:
+        out = Path(a.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "detection_study.json").write_text(json.dumps({"study": st, "false_alarms": fa, "config": kw}, indent=1, default=float))
+        plot_study(st, fa, out / "detection_study.png")
+        print(f"wrote {out / 'detection_study.json'} and {out / 'detection_study.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
