@@ -71,6 +71,8 @@ def _discover(args: argparse.Namespace) -> int:
     except (DiscoveryError, ValueError, OSError) as e:
         print(f"hdphm discover: {e}", file=sys.stderr)
         return 1
-    n = len(rep.get("effects", []))
-    print(f"{n} effect(s) found; report in {args.out}/report.json")
+    eff = rep.get("effects", [])
+    n = sum(1 for e in eff if e.get("confirmed", True))
+    un = f" ({len(eff) - n} more selected but unconfirmed on held-out data, not added)" if len(eff) > n else ""
+    print(f"{n} effect(s) found{un}; report in {args.out}/report.json")
     return 0

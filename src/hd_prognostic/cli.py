@@ -128,8 +128,20 @@ def _features(args) -> int:
     from hd_prognostic.evaluate import feature_study, load_fleet
 
     out = Path(args.out)
+    import numpy as np
+
     fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache", workers=args.workers)
-    res = feature_study(fleet, out)
+    # The study ranks features against the true wear (/sim/health): recorded bags have none, and
+    # every score would be NaN. Refuse clearly instead of printing a table of NaN.
+    with_truth = [a for a in fleet if a.h_true is not None and np.isfinite(a.h_true).sum() >= 2]
+    if not with_truth:
+        raise ValueError(f"{args.fleet_dir}: no actuator has wear ground truth (/sim/health) in its bags; the "
+                         "feature study scores features against the true wear, so it needs a simulated fleet "
+                         "(recorded bags: use 'hdphm prognose BAG_DIR')")
+    if len(with_truth) < len(fleet):
+        print(f"note: {len(fleet) - len(with_truth)} of {len(fleet)} actuators have no wear truth and are left "
+              "out of the study", file=sys.stderr)
+    res = feature_study(with_truth, out)
     for f, r in res.items():
         print(f"{f:20s} Spearman {r['spearman_mean']:+.2f} (min {r['spearman_min']:+.2f})  "
               f"Coble {r['coble_monotonicity_mean']:.2f}  AUC {r['auc_early_vs_advanced']:.2f}  "

@@ -81,13 +81,21 @@ class ActuatorData:
         return float(self.mission_index[i[0]]) if len(i) else float("nan")
 
 
+def _mission_bags(d: Path) -> list[Path]:
+    """One actuator's bags in ``d``: ``*.mcap`` files, plus the ``.mcap`` inside each ``ros2 bag``
+    directory (a sub-folder with ``metadata.yaml``, as ``ros2 bag record`` and ``rosbags`` write)."""
+    bags = [p for p in d.glob("*.mcap") if p.is_file()]
+    bags += [p for p in d.glob("*/*.mcap") if p.is_file() and (p.parent / "metadata.yaml").is_file()]
+    return sorted(bags)
+
+
 def find_bags(bag_dir: str | os.PathLike) -> list[Path]:
     d = Path(bag_dir)
     if not d.is_dir():
         raise FileNotFoundError(f"{d}: not a directory")
-    bags = sorted(d.glob("*.mcap"))
+    bags = _mission_bags(d)
     if not bags:
-        raise FileNotFoundError(f"{d}: no .mcap bags")
+        raise FileNotFoundError(f"{d}: no .mcap bags (neither *.mcap nor ros2 bag folders with metadata.yaml)")
     return bags
 
 
@@ -95,7 +103,7 @@ def find_actuator_dirs(fleet_dir: str | os.PathLike) -> list[Path]:
     d = Path(fleet_dir)
     if not d.is_dir():
         raise FileNotFoundError(f"{d}: not a directory")
-    dirs = sorted(p for p in d.iterdir() if p.is_dir() and any(p.glob("*.mcap")))
+    dirs = sorted(p for p in d.iterdir() if p.is_dir() and not (p / "metadata.yaml").is_file() and _mission_bags(p))
     if not dirs:
         raise FileNotFoundError(f"{d}: no actuator folders with .mcap bags")
     return dirs

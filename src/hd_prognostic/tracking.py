@@ -55,7 +55,11 @@ class RULHistory:
         # enough for PIT and CRPS when the history is scored later
         if self.samples:
             d["rul_quantile_levels"] = QUANTILE_LEVELS.tolist()
-            d["rul_quantiles"] = [np.quantile(s_, QUANTILE_LEVELS).tolist() for s_ in self.samples]
+            # RUL samples are +inf where a particle never fails within the horizon; linear
+            # interpolation between two inf gives NaN (inf - inf), so such sets use the
+            # interpolation-free inverted CDF: the quantile is then honestly +inf.
+            d["rul_quantiles"] = [np.quantile(s_, QUANTILE_LEVELS, method="linear" if np.isfinite(s_).all()
+                                              else "inverted_cdf").tolist() for s_ in self.samples]
         return _clean(d)
 
     @classmethod

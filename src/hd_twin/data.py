@@ -277,7 +277,9 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
     Q_all = np.asarray(mission.Q_red, dtype=np.float64)
     finite = np.isfinite(X_all[:, [0, 1, 2, 3, 4]]).all(axis=1) & np.isfinite(Q_all)
     if not finite.any():
-        raise ValueError(f"{where}: no sample has all of theta_m, omega_m, tau_m, theta_f, omega_f and Q_red finite")
+        raise ValueError(f"{where}: no sample has all of theta_m, omega_m, tau_m, theta_f, omega_f and Q_red "
+                         "finite" + (" (Q_red is NaN throughout: no output torque sensor, so the twin can be "
+                                     "neither trained nor scored on this bag)" if not np.isfinite(Q_all).any() else ""))
     sos = antialias_sos(fs, dec)
     out: list[Segment] = []
     for a, b in segment_bounds(mission.segment):

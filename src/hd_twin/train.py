@@ -525,9 +525,26 @@ def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
     pinn, norm, cfgd = load_pinn(model_dir)
     fs_model = cfgd["preprocessing"]["fs_model"]
     names = cfgd.get("features", D.FEATURES_V1)
-    segs = [s for m in missions for s in D.preprocess(m, fs_model, T_ref=pinn.params.T_ref, names=names)]
+    N_model = float(cfgd.get("params", {}).get("N", float("nan")))
+    segs, notes, used = [], [], 0
+    for m in missions:
+        where = mission_label(m)
+        try:
+            s_m = D.preprocess(m, fs_model, T_ref=pinn.params.T_ref, names=names)
+        except ValueError as e:
+            if len(missions) == 1:
+                raise
+            notes.append(f"skipped: {e}")  # one unusable bag of many: say so, score the others
+            continue
+        if np.isfinite(N_model) and abs(float(m.meta.gear_ratio) - N_model) > 1e-6 * N_model:
+            notes.append(f"{where}: gear ratio N = {float(m.meta.gear_ratio):g} differs from the N = {N_model:g} "
+                         "the model was trained on: the physics uses the bag's N, the network extrapolates")
+        segs += s_m
+        used += 1
     if not segs:
-        raise ValueError("no usable segment in the given missions")
+        raise ValueError("no usable segment in the given missions: " + "; ".join(notes))
     met = evaluate(pinn, segs, norm)
-    met["n_missions"] = len(missions)
+    met["n_missions"] = used
+    if notes:
+        met["notes"] = notes
     return met

@@ -11,7 +11,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import os
 import sys
+
+#: Exceptions that mean bad input, not a bug: reported as one line, exit status 1.
+#: (``hd_bag.BagError`` is a ValueError; numpy/scipy refuse bad arrays with ValueError.)
+USER_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError)
 
 #: Modules that add sub-commands, in the order ``hdphm --help`` shows them.
 COMMAND_MODULES = (
@@ -55,6 +60,14 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except USER_ERRORS as e:
+        # Bad input (a bag that breaks the contract, a missing file, an absurd value): the messages
+        # of these errors name the file and the problem; a traceback would only hide them.
+        # HDPHM_DEBUG=1 re-raises for the traceback.
+        if os.environ.get("HDPHM_DEBUG"):
+            raise
+        print(f"hdphm {args.command}: error: {e}", file=sys.stderr)
+        return 1
     return int(rc or 0)
 
 

@@ -610,6 +610,17 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     comp["n_library_columns"] = len(allidx)
     comp["n_candidates"] = len(groups)
 
+    if terms and ea.get("rmse", 0.0) > eb.get("rmse", float("inf")):
+        # Cross-validation on the fit blocks chose effects that make the *held-out* error worse (seen on
+        # a single 2 s foreign bag: Q_red NRMSE 0.17 -> 0.24): the selection does not generalise, so
+        # nothing is added to the twin and the effects are reported as unconfirmed.
+        statements.append(f"the selected effects raise the held-out {target} error (RMSE {eb['rmse']:.4g} -> "
+                          f"{ea['rmse']:.4g} N*m): the selection does not generalise (too little or too uniform "
+                          "data); reported as unconfirmed, the twin is left as it was")
+        comp["rejected_augmented_model"] = ea
+        for e in effects:
+            e["confirmed"] = False
+        terms, declared_after, ea = [], list(declared), dict(eb)
     plot = {"t": ds.t[score], "bag": ds.bag[score], "r_before": r_before[score], "r_after": r_after[score],
             "omega_m": sig["omega_m"][score], "theta_m": sig["theta_m"][score], "y": y[score]}
     for t in terms[:4]:
