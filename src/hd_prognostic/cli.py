@@ -52,6 +52,8 @@ def _prognose(args) -> int:
     hist = prognose(a, obs, n_particles=args.particles, seed=args.seed, likelihood=args.likelihood,
                     snapshots=() if args.no_plots else (max(0, n // 2), max(0, n - 1)), progress=True)
     _write_history(out, hist)
+    for s in hist.meta.get("notes", []):
+        print(f"note: {s}", file=sys.stderr)
     if args.no_plots:
         print(f"{a.actuator_id}: wrote {out}/rul_history.json and .csv")
         return 0

@@ -349,7 +349,27 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
                             "n_particles": n_particles, "seed": seed},
                  progress=progress, rul_particles=rul_particles, snapshots=snapshots)
     hours = a.operating_hours
+    notes = []
+    w_own = a.feature("W_load")
+    w_own = w_own[np.isfinite(w_own) & (w_own > 0)]
+    w_pop = float(obs.degradation.get("W_median", np.nan))
+    if len(w_own) and np.isfinite(w_pop) and w_pop > 0:
+        ratio = float(np.median(w_own)) / w_pop
+        if not 1 / 3 <= ratio <= 3:
+            # RUL is counted in missions: until 3 missions are seen the future missions are
+            # population missions, then this actuator's own, so a mission type unlike the
+            # training fleet's (shorter, gentler) makes the RUL in missions jump; say so.
+            notes.append(f"this actuator's missions carry {ratio:.3g} x the median load-sliding work W_load of the "
+                         f"population the observation model was fitted on ({np.median(w_own):.4g} J vs {w_pop:.4g} J):"
+                         " the RUL counts population-sized missions until 3 missions are seen, then this "
+                         "actuator's own, so expect a step in the RUL there")
+    y_ok = np.isfinite(y)
+    if (~y_ok).any():
+        notes.append(f"{int((~y_ok).sum())} of {len(y)} steps have no health observation (missing mission index, "
+                     f"unreadable bag or {obs.feature} not computable: too short, standstill or outside the "
+                     "feature's speed band); the filter only predicts there")
     hist.meta.update({
+        "notes": notes,
         "actuator_id": a.actuator_id, "feature": obs.feature, "n_bags": len(a.paths), "skipped_bags": a.errors,
         "hours_per_mission": float(np.median(np.diff(hours) / np.diff(a.mission_index))) if len(hours) > 1 else None,
         "likelihood": likelihood,
