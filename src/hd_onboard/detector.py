@@ -490,3 +490,180 @@ def calibrate_channel(r: np.ndarray, *, fs: float, ewma_tau_s: float, persistenc
     h_warn = max(min_h_warn, warn_margin * peak)
     h_error = max(min_h_error, error_margin * peak, 1.5 * h_warn)
     return ChannelThreshold(mu, sigma, float(h_warn), float(h_error), source).validate("self-calibration")
+
+
+# ---------------------------------------------------------------------------------------------
+# Friction (lubrication) monitor: the direction-odd part of the output-torque residual
+# ---------------------------------------------------------------------------------------------
+#: EW moment channels of :class:`FrictionMonitor`: weight, u, y, uu, uy
+_FM_NCH = 5
+
+
+@dataclass
+class FrictionReference:
+    """Healthy friction mismatch of one actuator: ``r_Q = a + b u``, ``u = tanh(omega_m/eps)``.
+
+    ``r_Q`` [N*m] is the output-torque residual (measured - expected Q_red); the twin's
+    declared friction is already in the expected torque, so ``b`` [N*m] is this unit's
+    output-referred Coulomb-like friction not explained by the twin (negative: more
+    friction than the twin's). ``a`` [N*m] offset (sensor zero, load-model bias);
+    ``eps`` [rad/s] width of the regularised sign (the twin's ``eps_omega``);
+    ``scale`` [N*m] the friction unit the excess is expressed in (the twin's nominal
+    output-referred Coulomb torque ``N T_C``); ``n`` samples it was fitted on.
+    """
+
+    a: float
+    b: float
+    eps: float
+    scale: float
+    n: int
+    source: str = "mission warm-up"
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def fit_friction_reference(r_Q: np.ndarray, omega_m: np.ndarray, eps: float, scale: float, min_samples: int = 200,
+                           min_var_u: float = 0.05, source: str = "mission warm-up") -> FrictionReference | None:
+    """Least-squares healthy law ``r_Q = a + b tanh(omega_m/eps)`` (NaN rows ignored).
+
+    ``r_Q`` [N*m], ``omega_m`` [rad/s], ``eps`` [rad/s], ``scale`` [N*m] > 0. None when the
+    data do not define it: fewer than ``min_samples`` valid rows or too little motion in
+    both directions (variance of u below ``min_var_u``).
+    """
+    r, w = np.asarray(r_Q, float), np.asarray(omega_m, float)
+    ok = np.isfinite(r) & np.isfinite(w)
+    if ok.sum() < min_samples or not (math.isfinite(scale) and scale > 0 and eps > 0):
+        return None
+    r, u = r[ok], np.tanh(w[ok] / eps)
+    if np.var(u) < min_var_u:
+        return None
+    coef, *_ = np.linalg.lstsq(np.column_stack([np.ones(len(u)), u]), r, rcond=None)
+    return FrictionReference(float(coef[0]), float(coef[1]), float(eps), float(scale), int(len(u)), source)
+
+
+class FrictionMonitor:
+    """Streaming friction estimator and flag (lubrication loss, one actuator).
+
+    Friction opposes motion, so more friction (lost or degraded lubricant: Coulomb,
+    viscous and mesh-flank terms all rise) lowers the measured output torque in the
+    direction of motion for the same motor torque: the residual ``r_Q = Q_red - Q_red_hat``
+    moves by ``-dL u`` with ``u = tanh(omega_m/eps)`` and ``dL`` [N*m] the extra
+    output-referred friction torque. An EWMA of ``r_Q`` alone averages that out over a
+    bidirectional manoeuvre; this monitor instead keeps exponentially weighted (time
+    constant ``tau_s``) moments of ``u`` and ``y = r_Q - a`` and solves the weighted
+    regression ``y = alpha + beta u``. The **friction excess** is
+
+        x = -(beta - b_ref) / scale    [-]
+
+    (extra friction torque in units of the twin's nominal output-referred Coulomb torque;
+    0 when healthy, about ``severity * (true friction) / scale`` after a lubrication loss
+    that multiplies friction by 1 + severity). It is evaluated only while the window holds
+    motion in both directions (weighted variance of u >= ``min_var_u``); elsewhere NaN and
+    the persistence run restarts. WARN above ``excess_warn``, ERROR above ``excess_error``,
+    each for ``persistence`` consecutive evaluable samples. Needs the measured ``Q_red``:
+    without it every sample is NaN (the monitor stays silent). Block (:meth:`step`) and
+    scalar (:meth:`step_one`) paths give the same numbers.
+    """
+
+    def __init__(self, tau_s: float = 2.0, excess_warn: float = 2.5, excess_error: float = 4.0,
+                 persistence: int = 250, min_var_u: float = 0.05, fs: float = 1000.0):
+        self.tau_s, self.excess_warn, self.excess_error = float(tau_s), float(excess_warn), float(excess_error)
+        self.min_var_u = float(min_var_u)
+        self.persistence = max(1, int(persistence))
+        self.ref: FrictionReference | None = None
+        self.set_rate(fs)
+        self.reset()
+
+    def set_rate(self, fs: float) -> None:
+        self.lam = min(1.0, 1.0 / (self.tau_s * fs))
+
+    def reset(self) -> None:
+        self.m = np.zeros(_FM_NCH)
+        self.run_warn = 0
+        self.run_error = 0
+        self.excess = math.nan  # last evaluable estimate
+        self.n_eval = 0
+
+    def _solve(self, m):
+        """Moments (..., 5) -> (excess, ok), vectorised."""
+        r = self.ref
+        W = m[..., 0]
+        Wd = np.where(W > 0, W, 1.0)
+        mu_, my = m[..., 1] / Wd, m[..., 2] / Wd
+        vuu = m[..., 3] / Wd - mu_ * mu_
+        vuy = m[..., 4] / Wd - mu_ * my
+        beta = vuy / np.where(vuu > 0, vuu, 1.0)
+        ok = (W > 0.6) & (vuu >= self.min_var_u)
+        return -(beta - r.b) / r.scale, ok
+
+    def step(self, r_Q: np.ndarray, omega_m: np.ndarray, valid: np.ndarray):
+        """Block -> (excess per sample, NaN where not evaluable; cond_warn; cond_error)."""
+        n = len(r_Q)
+        z = np.zeros(n, bool)
+        if self.ref is None or n == 0:
+            return np.full(n, np.nan), z, z
+        r = self.ref
+        u = np.tanh(np.asarray(omega_m, float) / r.eps)
+        y = np.asarray(r_Q, float) - r.a
+        valid = np.asarray(valid, bool) & np.isfinite(u) & np.isfinite(y)
+        M = np.empty((n, _FM_NCH))
+        lam = self.lam
+        if valid.any():
+            uv, yv = u[valid], y[valid]
+            Xv = np.column_stack([np.ones(len(uv)), uv, yv, uv * uv, uv * yv])
+            Mv, _ = lfilter([lam], [1.0, -(1.0 - lam)], Xv, axis=0, zi=((1.0 - lam) * self.m)[None, :])
+            pos = np.cumsum(valid) - 1
+            M[:] = np.where((pos >= 0)[:, None], Mv[np.clip(pos, 0, None)], self.m[None, :])
+            self.m = Mv[-1].copy()
+        else:
+            M[:] = self.m[None, :]
+        x, ok = self._solve(M)
+        ok &= valid
+        x = np.where(ok, x, np.nan)
+        rw = run_lengths(ok & (x > self.excess_warn), self.run_warn)
+        re = run_lengths(ok & (x > self.excess_error), self.run_error)
+        self.run_warn, self.run_error = int(rw[-1]), int(re[-1])
+        if ok.any():
+            self.excess = float(x[int(np.flatnonzero(ok)[-1])])
+            self.n_eval += int(ok.sum())
+        return x, rw >= self.persistence, re >= self.persistence
+
+    def step_one(self, r_Q: float, omega_m: float) -> tuple[float, bool, bool]:
+        """One sample (NaN allowed) -> (excess or NaN, cond_warn, cond_error); same arithmetic as :meth:`step`."""
+        r = self.ref
+        if r is None:
+            return math.nan, False, False
+        u = math.tanh(omega_m / r.eps)
+        y = r_Q - r.a
+        if not (u == u and y == y and abs(y) != math.inf):
+            self.run_warn = self.run_error = 0
+            return math.nan, False, False
+        lam, k = self.lam, 1.0 - self.lam
+        m = self.m
+        m0 = k * m[0] + lam
+        m1 = k * m[1] + lam * u
+        m2 = k * m[2] + lam * y
+        m3 = k * m[3] + lam * u * u
+        m4 = k * m[4] + lam * u * y
+        m[0], m[1], m[2], m[3], m[4] = m0, m1, m2, m3, m4
+        mu_, my = m1 / m0, m2 / m0
+        vuu = m3 / m0 - mu_ * mu_
+        vuy = m4 / m0 - mu_ * my
+        if not (m0 > 0.6 and vuu >= self.min_var_u):
+            self.run_warn = self.run_error = 0
+            return math.nan, False, False
+        x = -(vuy / vuu - r.b) / r.scale
+        self.excess = x
+        self.n_eval += 1
+        self.run_warn = self.run_warn + 1 if x > self.excess_warn else 0
+        self.run_error = self.run_error + 1 if x > self.excess_error else 0
+        return x, self.run_warn >= self.persistence, self.run_error >= self.persistence
+
+    def level(self) -> int:
+        """Level of the current estimate (persistence applied): OK / WARN / ERROR."""
+        if self.run_error >= self.persistence:
+            return ERROR
+        if self.run_warn >= self.persistence:
+            return WARN
+        return OK

@@ -63,6 +63,12 @@ def _margins(res: dict, core: OnboardCore) -> dict[str, float]:
 
         sm = core.stiffness
         out["stiffness"] = float(persistent_peak(tab[:, 8], sm.persistence) / sm.loss_warn) if np.isfinite(tab[:, 8]).any() else math.nan
+    if tab.shape[1] > 9:  # friction: largest excess held for the persistence time / excess_warn
+        from hd_ground.thresholds import persistent_peak
+
+        fm = core.friction
+        out["friction"] = (float(persistent_peak(tab[:, 9], fm.persistence) / fm.excess_warn)
+                           if np.isfinite(tab[:, 9]).any() else math.nan)
     return out
 
 
@@ -210,6 +216,32 @@ DEFAULT_CASES = (("lubrication_loss", 2.0), ("lubrication_loss", 3.0),
                  ("flexspline_stiffness_loss", 0.7))
 
 
+def first_crossings(res: dict, core: OnboardCore) -> dict[str, float | None]:
+    """First time [s since the mission start] each flag source held its WARN condition for its persistence.
+
+    Sources: ``Q_red``, ``twist`` (|EWMA| above h_warn), ``stiffness`` (loss above loss_warn), ``friction``
+    (excess above excess_warn), read back from the residual table of :func:`run_mission`; None when never.
+    A NaN sample ends a run here (the EWMA channels' own counters hold across NaN), so this can only be later.
+    """
+    from hd_onboard.detector import run_lengths
+
+    tab = res["table"]
+    if not len(tab):
+        return {}
+    t = tab[:, 0] - tab[0, 0]
+    pers_e = core.detectors["Q_red"].persistence
+    srcs = {"Q_red": (np.abs(tab[:, 4]), core.thresholds["Q_red"].h_warn, pers_e),
+            "twist": (np.abs(tab[:, 6]), core.thresholds["twist"].h_warn, pers_e),
+            "stiffness": (tab[:, 8], core.stiffness.loss_warn, core.stiffness.persistence)}
+    if tab.shape[1] > 9:
+        srcs["friction"] = (tab[:, 9], core.friction.excess_warn, core.friction.persistence)
+    out = {}
+    for k, (x, line, pers) in srcs.items():
+        hit = np.flatnonzero(run_lengths(np.nan_to_num(x, nan=-np.inf) > line, 0) >= pers)
+        out[k] = float(t[hit[0]]) if len(hit) else None
+    return out
+
+
 def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed: int = 7, seed0: int = 40,
                     duration: float = 16.0, config: OnboardConfig | None = None, progress: bool = False) -> dict[str, Any]:
     """Detection delay of the onboard core (physics stand-in, self-calibrated) on simulated faults.
@@ -244,14 +276,19 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
         r = run_mission(m, OnboardCore(gear_ratio=m.meta.gear_ratio, config=cfg))
         on = r["onset_s"]
         why = r["events"][0][2] if r["events"] else ""
-        rows[(name, sev)].append((seed, t_on, on, None if on is None or on < t_on else on - t_on, why))
+        rows[(name, sev)].append((seed, t_on, on, None if on is None or on < t_on else on - t_on, why,
+                                  first_crossings(r, r["core"])))
     for (name, sev), rr in rows.items():
         d = [x[3] for x in rr if x[3] is not None]
         out.append({"fault": name, "severity": sev, "n": len(rr), "detected": len(d),
                     "early": sum(1 for x in rr if x[2] is not None and x[2] < x[1]),
                     "missed": sum(1 for x in rr if x[2] is None),
                     "delay_median_s": float(np.median(d)) if d else math.nan,
-                    "delay_max_s": float(np.max(d)) if d else math.nan, "rows": rr})
+                    "delay_max_s": float(np.max(d)) if d else math.nan, "rows": rr,
+                    # per source: missions whose source crossed after the onset / before it
+                    "by_source": {s: {"after_onset": sum(1 for x in rr if x[5].get(s) is not None and x[5][s] >= x[1]),
+                                      "before_onset": sum(1 for x in rr if x[5].get(s) is not None and x[5][s] < x[1])}
+                                  for s in ("Q_red", "twist", "stiffness", "friction")}})
     return {"actuator": actuator, "pop_seed": pop_seed, "seed0": seed0, "duration_s": duration, "cases": out}
 
 
@@ -289,11 +326,14 @@ def plot_study(study: dict, fa: dict | None, path: str | os.PathLike) -> None:
 
 def study_table(study: dict, fa: dict | None = None) -> str:
     """Markdown table of a :func:`detection_study` (and a false-alarm summary)."""
-    lines = ["| fault | severity | detected | missed | flagged before onset | median delay [s] | max delay [s] |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| fault | severity | detected | missed | flagged before onset | median delay [s] | max delay [s] | "
+             "by source after onset (before) |",
+             "|---|---|---|---|---|---|---|---|"]
     for c in study["cases"]:
+        bs = c.get("by_source", {})
+        src = ", ".join(f"{k} {v['after_onset']} ({v['before_onset']})" for k, v in bs.items())
         lines.append(f"| {c['fault']} | {c['severity']:g} | {c['detected']}/{c['n']} | {c['missed']} | {c['early']} | "
-                     f"{c['delay_median_s']:.2f} | {c['delay_max_s']:.2f} |")
+                     f"{c['delay_median_s']:.2f} | {c['delay_max_s']:.2f} | {src} |")
     if fa:
         lines.append(f"\nfalse alarms ({fa['mode']}): WARN or worse in {fa['missions_warn_or_worse']}/{fa['n_missions']} "
                      f"healthy missions, ERROR in {fa['missions_error']}; reasons: "
