@@ -603,6 +603,33 @@ def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_fi
             yield blk
 
 
+def read_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
+    """Every Metadata record of an MCAP file (name -> key/value map), without decompressing a chunk.
+
+    Walks the data section record by record (length prefixes, ``seek`` over chunks and
+    messages) up to DataEnd. For consumers that need ``hd_mission`` *before* the messages:
+    other tools (``mcap-ros2-support``, ``rosbags``, ``ros2 bag``) write metadata records
+    after the chunks, so a streaming reader only meets them at the end. Raises
+    :class:`McapFormatError` on a non-MCAP file; a truncated file gives what precedes the cut.
+    """
+    out: dict[str, dict[str, str]] = {}
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        if f.read(8) != MAGIC:
+            raise McapFormatError("not an MCAP file (bad magic bytes at offset 0)")
+        pos = 8
+        while pos + 9 <= size:
+            f.seek(pos)
+            op, ln = struct.unpack("<BQ", f.read(9))
+            if op == OP_DATA_END or op == OP_FOOTER or pos + 9 + ln > size:
+                break
+            if op == OP_METADATA:
+                name, md = _parse_metadata(f.read(ln))
+                out[name] = md
+            pos += 9 + ln
+    return out
+
+
 def payloads(block: MessageBlock, sel: np.ndarray) -> list[bytes]:
     """Payload bytes of the selected messages of a block (for the generic decoder)."""
     b = block.buf

@@ -34,6 +34,10 @@ TOPIC_COMMAND = "/hd/command"
 TOPIC_TEMPERATURE = "/hd/temperature"
 CONTRACT_TOPICS = (TOPIC_JOINT_STATES, TOPIC_COMMAND, TOPIC_TEMPERATURE)
 TEMPERATURE_FRAMES = ("motor_winding", "gearbox")
+#: rad at the output: |median(theta_f - theta_m / N)| above this is not a twist of the
+#: transmission (wind-up plus lost motion of a harmonic drive at peak torque stays below ~0.01 rad)
+#: but motor and output encoders without a common zero (CONTRACT: theta_m = N theta_f + compliance).
+MAX_TWIST_OFFSET = 0.05
 #: Gaps longer than this many nominal sample periods are never interpolated.
 MAX_INTERP_GAP_SAMPLES = 10
 
@@ -76,6 +80,9 @@ class ReadReport:
     gaps: list[tuple[int, int]] = field(default_factory=list)  # (index after the gap, missing samples)
     n_nan: dict[str, int] = field(default_factory=dict)  # NaN samples per signal (kept as NaN)
     nominal_dt: float = float("nan")  # s, median stamp step
+    #: rad, median of theta_f - theta_m / N (output-side twist; physically below ~0.01 rad). Larger
+    #: means the two encoders are not co-referenced: twist-based estimates are meaningless.
+    twist_offset: float = float("nan")
     notes: list[str] = field(default_factory=list)  # human-readable account of every action
 
     def summary(self) -> str:

@@ -44,7 +44,7 @@ import numpy as np
 from . import cdr
 from .errors import BagError, Violation
 from .mcapio import McapFormatError, McapScan, MessageBlock, gather_rows, payloads, scan_mcap
-from .mission import (CONTRACT_TOPICS, JOINT_SIGNALS, MAX_INTERP_GAP_SAMPLES, REQUIRED_META_KEYS, SOURCES,
+from .mission import (CONTRACT_TOPICS, JOINT_SIGNALS, MAX_INTERP_GAP_SAMPLES, MAX_TWIST_OFFSET, REQUIRED_META_KEYS, SOURCES,
                       TEMPERATURE_FRAMES, TOPIC_COMMAND, TOPIC_JOINT_STATES, TOPIC_TEMPERATURE, Mission,
                       MissionMeta, ReadReport)
 from .writer import SIM_TOPICS, TOPIC_SIM_EFFECTS, TOPIC_SIM_HEALTH, TOPIC_SIM_INTERNAL, check_meta
@@ -481,6 +481,18 @@ def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
                          f"report.gaps; not interpolated; {int(big.sum())} gaps longer than "
                          f"{MAX_INTERP_GAP_SAMPLES} samples split the mission into {int(segment[-1]) + 1} segments")
     rep.nominal_dt = dt
+    if meta is not None:
+        tw = M[:, 1] - M[:, 0] / float(meta.gear_ratio)
+        tw = tw[np.isfinite(tw)]
+        if len(tw):
+            rep.twist_offset = float(np.median(tw))
+            if abs(rep.twist_offset) > MAX_TWIST_OFFSET:
+                msg = (f"theta_f - theta_m / N has median {rep.twist_offset:.6g} rad (N = {meta.gear_ratio:g}): far "
+                       f"beyond any transmission twist (> {MAX_TWIST_OFFSET:g} rad), so theta_m and theta_f have no "
+                       "common zero (contract: theta_m = N theta_f + compliance); twist-based estimates (twin, "
+                       "stiffness, lost motion) are meaningless until the encoders are co-referenced")
+                raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg))
+                rep.notes.append(msg)
     rep.n_nan = {nm: int(np.isnan(M[:, c]).sum()) for c, nm in enumerate(JOINT_SIGNALS)}
     t0 = int(s[0])
     t = (s - t0) * 1e-9

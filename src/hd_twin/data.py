@@ -166,6 +166,23 @@ def feature_columns(names: Sequence[str]) -> list[int]:
     return [FEATURES.index(n) for n in names]
 
 
+def check_twist_reference(mission, N: float, where: str) -> None:
+    """Refuse a mission whose motor and output encoders have no common zero (ValueError naming it).
+
+    The twin's inputs are built on the output-side twist ``phi = theta_f - theta_m / N`` [rad]; an
+    encoder offset adds a constant to it that no training covers (a 1e4 rad theta_m offset gave
+    R^2 = -2e30 on a foreign bag). Threshold: ``hd_bag.mission.MAX_TWIST_OFFSET``.
+    """
+    from hd_bag.mission import MAX_TWIST_OFFSET  # noqa: PLC0415
+
+    tw = np.asarray(mission.theta_f, float) - np.asarray(mission.theta_m, float) / N
+    tw = tw[np.isfinite(tw)]
+    if len(tw) and abs(float(np.median(tw))) > MAX_TWIST_OFFSET:
+        raise ValueError(f"{where}: theta_f - theta_m / N has median {float(np.median(tw)):.6g} rad (N = {N:g}), "
+                         f"beyond any transmission twist (> {MAX_TWIST_OFFSET:g} rad): motor and output encoders "
+                         "have no common zero; co-reference them (theta_m = N theta_f + twist) before using the twin")
+
+
 def segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
     """(start, stop) index pairs of the constant runs of ``segment``."""
     seg = np.asarray(segment)
@@ -271,6 +288,7 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
     N = float(mission.meta.gear_ratio)
     if not math.isfinite(N) or N <= 0:
         raise ValueError(f"{where}: gear_ratio {mission.meta.gear_ratio!r} is not a positive number")
+    check_twist_reference(mission, N, where)
     fs = mission.fs
     dec = decimation_for(fs, fs_model, where)
     X_all = mission_inputs(mission)

@@ -125,6 +125,7 @@ class StreamingTwin:
 
     def run_mission(self, mission) -> dict[str, np.ndarray]:
         """Whole-mission inference, one reset per gap-free segment (as the node does after a gap)."""
+        D.check_twist_reference(mission, float(mission.meta.gear_ratio), mission.report.path or "mission")
         X = D.mission_inputs(mission)
         res = {k: [] for k in OUTPUT_NAMES + ("index",)}
         for a, b in D.segment_bounds(mission.segment):

@@ -520,6 +520,26 @@ def load_pinn(model_dir: str | Path):
     return pinn, norm, cfgd
 
 
+#: |z| of a normalised network feature beyond which a sample is outside the training data.
+OOR_SIGMA = 8.0
+#: Fraction of such samples above which :func:`eval_model` notes the feature.
+OOR_FRAC = 0.01
+
+
+def out_of_range(norm, segs: Sequence, names: Sequence[str]) -> dict:
+    """Features whose values lie beyond ``OOR_SIGMA`` training standard deviations in more than
+    ``OOR_FRAC`` of the samples: ``{name: {"frac", "max_z"}}`` (empty when the data are in range)."""
+    F = np.concatenate([s.F for s in segs])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        Z = np.abs((F - norm.f_mean) / norm.f_std)
+    out = {}
+    for j, nm in enumerate(names):
+        z = Z[:, j][np.isfinite(Z[:, j])]
+        if len(z) and (z > OOR_SIGMA).mean() > OOR_FRAC:
+            out[nm] = {"frac": float((z > OOR_SIGMA).mean()), "max_z": float(z.max())}
+    return out
+
+
 def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
     """Metrics of a trained model on other missions (N, k_t from each bag's metadata)."""
     pinn, norm, cfgd = load_pinn(model_dir)
@@ -543,7 +563,15 @@ def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
         used += 1
     if not segs:
         raise ValueError("no usable segment in the given missions: " + "; ".join(notes))
+    oor = out_of_range(norm, segs, names)
+    if oor:
+        worst = ", ".join(f"{k} ({v['frac']:.0%} of samples, up to {v['max_z']:.3g} sigma)" for k, v in oor.items())
+        notes.append(f"inputs far outside the training data (> {OOR_SIGMA:g} sigma of the training "
+                     f"normalisation): {worst}; the network extrapolates and these metrics say little about the "
+                     "twin (other hardware, other operating range, encoder offsets or units?)")
     met = evaluate(pinn, segs, norm)
+    if oor:
+        met["out_of_range"] = oor
     met["n_missions"] = used
     if notes:
         met["notes"] = notes

@@ -360,6 +360,15 @@ def v_theta_m_offset(s: Streams, seed: int = 0) -> Streams:
     return replace(s, js=js)
 
 
+def v_theta_large(s: Streams, seed: int = 0) -> Streams:
+    """Both encoders far from zero but co-referenced: theta_m + 1e4 rad, theta_f and theta_ref + 1e4 / N."""
+    N = float(s.meta["gear_ratio"])
+    js = s.js.copy()
+    js[:, 0] += 1.0e4
+    js[:, 1] += 1.0e4 / N
+    return replace(s, js=js, theta_ref=s.theta_ref + 1.0e4 / N)
+
+
 def v_extra_topics(s: Streams, seed: int = 0) -> Streams:
     return replace(s, extra_topics=True)
 
@@ -405,7 +414,7 @@ class Variant:
     writer: str = "mcap_ros2"  # mcap_ros2 | rosbags
     compression: str = "zstd"  # zstd | lz4 | none (rosbags: zstd or none)
     chunked: bool = True
-    expect: str = "ok"  # ok | error
+    expect: str = "ok"  # ok | error | flagged (readable, validate reports an error, the twin refuses)
     match: str = ""  # substring the error must contain
 
 
@@ -432,7 +441,9 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in [
     Variant("short", "0.5 s mission", sim={"duration": 0.5}),
     Variant("dropout", "2 s joint-state dropout in a 5 s mission", sim={"duration": 5.0}, vary=v_dropout_2s),
     Variant("dup_disorder", "2 % duplicated, 3 % swapped stamps", vary=v_dup_and_disorder),
-    Variant("theta_offset", "theta_m starts at 1e4 rad", vary=v_theta_m_offset),
+    Variant("theta_large", "theta_m near 1e4 rad, theta_f co-referenced (+1e4/N)", vary=v_theta_large),
+    Variant("theta_offset", "theta_m offset by 1e4 rad alone (encoders without a common zero)",
+            vary=v_theta_m_offset, expect="flagged", match="common zero"),
     Variant("extra_topics", "/tf and /rosout in the bag", vary=v_extra_topics),
     Variant("names_reversed", "joint names [output, motor]", vary=v_names_reversed),
     Variant("meta_sloppy", "padded metadata strings, extra keys", vary=v_meta_spacing),
