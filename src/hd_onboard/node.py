@@ -109,7 +109,9 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.hardware_id = self.p["actuator_id"] or ""
             self.meta: dict = {}
             self.core = None
-            self.n_msgs = {t: 0 for t in ru.CONTRACT_TOPICS}
+            self.n_msgs = {t: 0 for t in ru.CONTRACT_TOPICS}  # decoded messages
+            self.n_taken = {t: 0 for t in ru.CONTRACT_TOPICS}  # messages taken from DDS (decodable or not)
+            self.n_mission_msgs = 0  # /hd/mission messages taken
             self.n_bad = 0
             self.last_wall = {t: None for t in ru.CONTRACT_TOPICS}
             self.last_stamp = {t: None for t in ru.CONTRACT_TOPICS}
@@ -180,6 +182,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.level = OK
 
         def _on_mission(self, msg):
+            self.n_mission_msgs += 1
             with self._lock:
                 return self._on_mission_impl(msg)
 
@@ -290,6 +293,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             t_arrival = time.perf_counter()
             msgs = ru.take_all(self.sub_js, first)
             n = len(msgs)
+            self.n_taken[ru.TOPIC_JOINT_STATES] += n
             if n > int(self.p["short_path_max"]):
                 stamps, V, frame, problems = ru.decode_joint_states(msgs)
             else:
@@ -378,16 +382,18 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 return self._on_cmd_impl(first)
 
         def _on_cmd_impl(self, first):
-            for b in ru.take_all(self.sub_cmd, first):
-                try:
-                    s, _, _, pos, _, _ = ru.decode_joint_state(b)
-                except ru.CdrError as e:
-                    self._error(f"{ru.TOPIC_COMMAND}: {e}")
-                    continue
-                self.n_msgs[ru.TOPIC_COMMAND] += 1
-                self.last_stamp[ru.TOPIC_COMMAND] = s
-                if len(pos):
-                    self.core.push_command(s, float(pos[0]))
+            msgs = ru.take_all(self.sub_cmd, first)
+            self.n_taken[ru.TOPIC_COMMAND] += len(msgs)
+            stamps, V, _, problems = ru.decode_joint_states(msgs)  # column 0: position[0] = theta_ref
+            for e in problems:
+                self._error(f"{ru.TOPIC_COMMAND}: {e}")
+            self.n_msgs[ru.TOPIC_COMMAND] += len(stamps)
+            if len(stamps):
+                self.last_stamp[ru.TOPIC_COMMAND] = int(stamps[-1])
+            has = np.flatnonzero(~np.isnan(V[:, 0]))
+            if len(has):  # the core keeps the latest reference only; a command without a position is counted
+                i = int(has[-1])
+                self.core.push_command(int(stamps[i]), float(V[i, 0]))
             self.last_wall[ru.TOPIC_COMMAND] = time.monotonic()
 
         def _on_temp(self, first):
@@ -395,7 +401,9 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 return self._on_temp_impl(first)
 
         def _on_temp_impl(self, first):
-            for b in ru.take_all(self.sub_tmp, first):
+            msgs = ru.take_all(self.sub_tmp, first)
+            self.n_taken[ru.TOPIC_TEMPERATURE] += len(msgs)
+            for b in msgs:
                 try:
                     s, frame, v = ru.decode_temperature(b)
                 except ru.CdrError as e:

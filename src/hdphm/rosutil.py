@@ -20,6 +20,7 @@ This module imports rclpy lazily inside functions where possible so that
 from __future__ import annotations
 
 import array
+import contextlib
 import importlib
 import json
 import math
@@ -162,6 +163,33 @@ def init_context(domain_id: int | None = None, args: list[str] | None = None):
     ctx = rclpy.Context()
     rclpy.init(args=args, context=ctx, domain_id=None if domain_id is None else int(domain_id))
     return ctx
+
+
+PUBLICATION_MODE_ENV = "RMW_FASTRTPS_PUBLICATION_MODE"
+
+
+@contextlib.contextmanager
+def publication_mode(mode: str | None):
+    """Within the block, a context's first node is created with Fast DDS publication ``mode``.
+
+    ``"ASYNCHRONOUS"``: a writer queues the sample and the middleware's own
+    thread delivers it (GIL-free, beside the Python executor; the choice for
+    max-rate replay); ``"SYNCHRONOUS"``: delivered in the publishing thread
+    (lowest latency, rmw_fastrtps's default); None: leave as is. rmw_fastrtps
+    reads ``$RMW_FASTRTPS_PUBLICATION_MODE`` when a context creates its
+    participant (its first node), so create that node inside the block. A
+    value the user exported wins.
+    """
+    if mode is not None and mode not in ("ASYNCHRONOUS", "SYNCHRONOUS", "AUTO"):
+        raise ValueError(f"publication mode {mode!r}: one of ASYNCHRONOUS, SYNCHRONOUS, AUTO")
+    if mode is None or PUBLICATION_MODE_ENV in os.environ:
+        yield
+        return
+    os.environ[PUBLICATION_MODE_ENV] = mode
+    try:
+        yield
+    finally:
+        os.environ.pop(PUBLICATION_MODE_ENV, None)
 
 
 #: executor kind of the stack: "single" (SingleThreadedExecutor, the default) or "events"
