@@ -1,0 +1,154 @@
+"""Every user-facing command on foreign-style bags: a correct result or one clear error (exit 1), no traceback.
+
+Commands: ``train`` (tiny, 2 epochs, once), ``twin eval``, ``prognose``,
+``prognostic features``, ``discover``, ``onboard eval``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from hdphm.cli import main
+from tests.robustness import foreign as FB
+
+#: variants the 1 kHz twin must score without a note (same hardware, same rate family)
+EVAL_CLEAN = ["plain", "rosbags", "lz4", "unchunked", "jitter", "no_temp", "dup_disorder", "extra_topics",
+              "names_reversed"]
+
+
+def _eval(capsys, model, *bags):
+    rc = main(["twin", "eval", str(model), *map(str, bags)])
+    cap = capsys.readouterr()
+    assert "Traceback" not in cap.err
+    return rc, (json.loads(cap.out) if rc == 0 else None), cap.err
+
+
+@pytest.mark.parametrize("name", EVAL_CLEAN)
+def test_twin_eval_scores_foreign_bags(foreign_twin, foreign_bags, name, capsys):
+    rc, met, _ = _eval(capsys, foreign_twin, foreign_bags[name])
+    assert rc == 0 and met["n_missions"] == 1
+    assert math.isfinite(met["rmse"]) and met["r2"] > 0.3, met
+    assert "notes" not in met
+
+
+def test_twin_eval_across_a_dropout(foreign_twin, foreign_bags, capsys):
+    """5 s mission with a 2 s hole: both segments scored (3000 samples), nothing bridged."""
+    rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["dropout"])
+    assert rc == 0 and met["n"] == 3000 and met["r2"] > 0.3
+    # the 5 s inspection mission has larger steps than the 2 s training missions: an honest range note
+    assert all("outside the training data" in s for s in met.get("notes", []))
+
+
+def test_twin_eval_very_short_mission(foreign_twin, foreign_bags, capsys):
+    rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["short"])  # 0.5 s: one LSTM warm-up, scored whole
+    assert rc == 0 and met["n"] == 500 and math.isfinite(met["rmse"]) and math.isfinite(met["r2"])
+
+
+def test_twin_eval_10khz_bag_is_decimated(foreign_twin, foreign_bags, capsys):
+    rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["fs10k"])
+    assert rc == 0 and met["n"] == 600 and math.isfinite(met["rmse"])  # 6000 samples at 10 kHz -> 1 kHz
+
+
+def test_twin_eval_refusals_are_one_line(foreign_twin, foreign_bags, capsys):
+    for name, msg in (("fs100", "cannot be decimated"), ("no_torque", "no output torque sensor"),
+                      ("theta_offset", "no common zero")):
+        rc, _, err = _eval(capsys, foreign_twin, foreign_bags[name])
+        assert rc == 1 and msg in err and str(foreign_bags[name]) in err, err
+
+
+def test_twin_eval_notes_other_hardware_and_out_of_range_inputs(foreign_twin, foreign_bags, capsys):
+    rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["n160"], foreign_bags["no_torque"], foreign_bags["plain"])
+    assert rc == 0 and met["n_missions"] == 2
+    notes = " ".join(met["notes"])
+    assert "N = 160 differs" in notes and "skipped" in notes and "no_torque" in notes
+    rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["theta_large"])  # flap 99 rad: far outside training
+    assert rc == 0 and "theta_f" in met["out_of_range"] and met["out_of_range"]["theta_f"]["frac"] > 0.99
+    assert any("outside the training data" in s for s in met["notes"])
+
+
+def test_train_refuses_a_folder_with_an_unusable_bag(foreign_bags, tmp_path, capsys):
+    import shutil
+
+    d = tmp_path / "bags"
+    d.mkdir()
+    shutil.copy(foreign_bags["plain"], d / "a.mcap")
+    shutil.copy(foreign_bags["no_kt"], d / "b.mcap")
+    rc = main(["train", "--preset", "tiny", "--bags", str(d), "--epochs", "1", "--out", str(tmp_path / "m")])
+    err = capsys.readouterr().err
+    assert rc == 1 and "b.mcap" in err and "torque_constant" in err and "Traceback" not in err
+
+
+def test_prognose_reads_ros2_bag_folders_in_mission_order(foreign_actuator, tmp_path, capsys):
+    d, paths = foreign_actuator
+    out = tmp_path / "prog"
+    assert main(["prognose", str(d), "--out", str(out), "--no-plots", "--particles", "500"]) == 0
+    err = capsys.readouterr().err
+    h = json.loads((out / "rul_history.json").read_text())
+    assert h["unit"] == "FX-0100" and h["t"] == [float(k) for k in range(9)]
+    z = np.array([np.nan if isinstance(v, str) else v for v in h["z"]], float)
+    assert np.isnan(z[[2, 5, 6]]).all() and np.isfinite(z[[0, 1, 3, 4, 7, 8]]).all()  # gaps: predict-only
+    assert "3 of 9 steps have no health observation" in err
+    # mission-length note: 1.5 s missions vs the 20 s missions of the fitted population
+    assert any("load-sliding work" in s for s in h["meta"]["notes"])
+    q = np.array(h["rul_quantiles"], dtype=object)
+    assert all(not (isinstance(v, float) and math.isnan(v)) and v != "nan" for row in q for v in row)
+    assert len(paths) == 6
+
+
+def test_prognose_skips_an_unreadable_bag_with_a_note(foreign_actuator, foreign_bags, tmp_path, capsys):
+    import shutil
+
+    d, _ = foreign_actuator
+    d2 = tmp_path / "act"
+    shutil.copytree(d, d2)
+    shutil.copy(foreign_bags["zero_stamps"], d2 / "broken.mcap")
+    assert main(["prognose", str(d2), "--out", str(tmp_path / "p"), "--no-plots", "--particles", "300"]) == 0
+    h = json.loads((tmp_path / "p" / "rul_history.json").read_text())
+    assert any("broken.mcap" in s and "stamp" in s for s in h["meta"]["skipped_bags"])
+
+
+def test_prognose_on_an_empty_or_missing_folder(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    assert main(["prognose", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) != 0
+    assert "empty: no .mcap bags" in capsys.readouterr().err
+    assert main(["prognose", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) != 0
+    assert "nowhere: not a directory" in capsys.readouterr().err
+
+
+def test_feature_study_refuses_bags_without_wear_truth(foreign_actuator, tmp_path, capsys):
+    d, _ = foreign_actuator
+    rc = main(["prognostic", "features", str(d.parent), "--out", str(tmp_path / "f")])
+    err = capsys.readouterr().err
+    assert rc != 0 and "no actuator has wear ground truth" in err and "Traceback" not in err
+
+
+def test_discover_never_adds_effects_that_worsen_held_out_error(foreign_bags, tmp_path, capsys):
+    out = tmp_path / "disc"
+    assert main(["discover", str(foreign_bags["plain"]), "--out", str(out), "--no-plots"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    for s in rep["signals"]:
+        if s["identifiable"] and s["error_after"]:
+            assert s["error_after"]["rmse"] <= s["error_before"]["rmse"] + 1e-9, s["signal"]
+    confirmed = [e for e in rep["effects"] if e.get("confirmed", True)]
+    assert (rep["twin_out"] is None) == (not confirmed)
+
+
+def test_discover_without_torque_sensor_uses_tau_m_only(foreign_bags, tmp_path, capsys):
+    out = tmp_path / "disc"
+    assert main(["discover", str(foreign_bags["no_torque"]), "--out", str(out), "--no-plots"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert [s["signal"] for s in rep["signals"]] == ["tau_m"]
+
+
+def test_onboard_eval_runs_on_foreign_bags(foreign_bags, tmp_path, capsys):
+    bags = [str(foreign_bags[n]) for n in ("plain", "rosbags", "no_torque", "no_temp", "dropout")]
+    rc = main(["onboard", "eval", *bags, "--out", str(tmp_path / "ob"), "--quiet"])
+    cap = capsys.readouterr()
+    assert rc == 0 and "Traceback" not in cap.err
+    assert (tmp_path / "ob" / "onboard_eval.json").is_file()
+    rc = main(["onboard", "eval", str(foreign_bags["no_kt"]), "--quiet"])
+    assert rc != 0 and "torque_constant" in capsys.readouterr().err
