@@ -133,12 +133,21 @@ def node_bench(a) -> None:
 
     synth = os.path.join(HERE, "..", "tests", "onboard")
     out = {}
-    for k, mode in enumerate(("baseline", "onboard", "onboard_rt")):
+    modes = ("baseline", "onboard", "onboard_rt", "baseline_fifo", "onboard_rt_fifo", "onboard_rt_inline_fifo")
+    fifo_ok = ""
+    for k, mode in enumerate(modes):
         dom = a.domain_id + k
+        fifo = mode.endswith("_fifo")
+        inline = "_inline" in mode
+        if fifo:  # as `hdphm node onboard --rt-priority`: the middleware's threads inherit SCHED_FIFO
+            fifo_ok = ru.set_thread_realtime(a.rt_priority)
+            if fifo_ok:
+                print(f"[node] {mode} skipped: {fifo_ok}")
+                continue
         ctx = ru.init_context(dom)
         ex = ru.make_executor(ctx)
         lat: list[int] = []
-        if mode == "baseline":
+        if mode.startswith("baseline"):
             node = Node("bench_counter", context=ctx)
             holder = {}
 
@@ -150,9 +159,13 @@ def node_bench(a) -> None:
             holder["s"] = node.create_subscription(JointState, ru.TOPIC_JOINT_STATES, cb, ru.qos("sensor"), raw=True)
         else:
             node = make_node(context=ctx, overrides={"latency_probe": True, "actuator_id": "EMA-BENCH",
-                                                     "rt_thread": mode == "onboard_rt"})
+                                                     "rt_thread": mode.startswith("onboard_rt"),
+                                                     "rt_priority": a.rt_priority if fifo else 0,
+                                                     "feature_thread": not inline})
             lat = node.latency_ns
         ex.add_node(node)
+        if fifo:
+            ru.set_thread_realtime(0)  # the main thread (timers, twin state) back to normal; the node's threads keep it
         env = dict(os.environ)
         proc = subprocess.Popen([sys.executable, "-c", PUBLISHER.format(synth=synth, domain=dom, seconds=a.node_seconds,
                                                                         n_subs=1)], env=env)
@@ -172,12 +185,20 @@ def node_bench(a) -> None:
         out[mode] = np.asarray(lat, float) * 1e-9
         if os.environ.get("HDPHM_BENCH_DUMP"):
             np.save(os.path.join(os.environ["HDPHM_BENCH_DUMP"], f"lat_{mode}.npy"), out[mode])
-        if mode != "baseline":
+        if not mode.startswith("baseline"):
             out[mode + "_windows"] = node.n_published[ru.TOPIC_FEATURES]
-    b = out["baseline"]
-    print(f"[node] 1 kHz publisher process -> subscriber: baseline (receive only) n={len(b)} p50 {_pct(b, 50):.3f} ms, "
-          f"p99 {_pct(b, 99):.3f} ms")
-    for mode, what in (("onboard", "one executor"), ("onboard_rt", "rt_thread: joint states on their own executor thread")):
+    for bm in ("baseline", "baseline_fifo"):
+        if bm in out:
+            b = out[bm]
+            print(f"[node] 1 kHz publisher process -> subscriber: {bm} (receive only{', SCHED_FIFO' if 'fifo' in bm else ''}) "
+                  f"n={len(b)} p50 {_pct(b, 50):.3f} ms, p99 {_pct(b, 99):.3f} ms")
+    for mode, what in (("onboard", "one executor"), ("onboard_rt", "rt_thread: joint states on their own executor thread"),
+                       ("onboard_rt_fifo", f"rt_thread + SCHED_FIFO {a.rt_priority} for it and the middleware threads"),
+                       ("onboard_rt_inline_fifo", "the same, window features on the joint-state thread after the flag "
+                                                  "(feature_thread false: no other Python thread holds the GIL)")):
+        if mode not in out:
+            continue
+        b = out["baseline_fifo" if mode.endswith("fifo") else "baseline"]
         o = out[mode]
         p99 = _pct(o, 99)
         print(f"[node] onboard node ({what}; decode + short path + flag publish) n={len(o)} p50 {_pct(o, 50):.3f} ms, "
@@ -190,11 +211,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="hdphm bench onboard")
     ap.add_argument("--seconds", type=float, default=20.0, help="mission length [s] at 1 kHz (core benchmarks)")
     ap.add_argument("--latency-samples", type=int, default=20000)
-    ap.add_argument("--node-seconds", type=float, default=15.0, help="length of the 1 kHz node stream [s]")
+    ap.add_argument("--node-seconds", type=float, default=10.0, help="length of the 1 kHz node stream [s]")
     ap.add_argument("--model-dir", default="", help="trained twin (ONNX) to time as well")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--domain-id", type=int, default=211)
     ap.add_argument("--skip-node", action="store_true")
+    ap.add_argument("--rt-priority", type=int, default=40, help="SCHED_FIFO priority of the *_fifo runs")
     a = ap.parse_args(argv)
     try:
         import torch

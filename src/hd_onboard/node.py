@@ -21,6 +21,7 @@ joint-state time advanced ``stale_timeout_s`` past their last sample).
 from __future__ import annotations
 
 import math
+import os
 import sys
 import threading
 import time
@@ -56,6 +57,7 @@ PARAMS: dict[str, Any] = {
     "residual_rows": 100,  # residual rows per /hd/onboard/residuals message (sooner on a level change)
     "feature_thread": True,  # window statistics/features in a worker thread (never delays a flag)
     "rt_thread": False,  # joint states on their own node + executor thread (lowest latency; not for in-process replay)
+    "rt_priority": 0,  # 1-99: the joint-state thread (rt_thread) runs SCHED_FIFO at this priority (0: normal)
     "latency_probe": False,  # bench only: record wall-clock now - header.stamp per sample (stamps must be wall time)
 }
 
@@ -122,7 +124,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.errors: list[str] = []
             self.latency_ns: list[int] = []  # latency_probe: per sample, decision wall time - header.stamp
             self._pending_feat: deque = deque()  # futures of window rows, in window order
-            self._pool = ThreadPoolExecutor(1, thread_name_prefix="onboard-features") if self.p["feature_thread"] else None
+            self._pool = (ThreadPoolExecutor(1, thread_name_prefix="onboard-features", initializer=_normal_priority)
+                          if self.p["feature_thread"] else None)
             if self._pool is not None and sys.getswitchinterval() > 5e-4:
                 # the worker holds the GIL at most this long when a sample arrives (default 5 ms)
                 sys.setswitchinterval(5e-4)
@@ -156,6 +159,11 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 self._rt.start()
 
         def _rt_spin(self):
+            prio = int(self.p["rt_priority"])
+            if prio:
+                why = ru.set_thread_realtime(prio)
+                if why:
+                    self.get_logger().warning(f"joint-state thread not real-time: {why}")
             while not self._rt_stop.is_set() and self.context.ok():
                 try:
                     self._rt_exec.spin_once(timeout_sec=0.1)
@@ -503,6 +511,13 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             return super().destroy_node()
 
     return OnboardNode()
+
+
+def _normal_priority() -> None:
+    """Worker threads (window features) run SCHED_OTHER even in a process started real-time
+    (``hdphm node onboard --rt-priority``): they must never delay the joint-state path."""
+    if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) != os.SCHED_OTHER:
+        ru.set_thread_realtime(0)
 
 
 class _Done:

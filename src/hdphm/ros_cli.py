@@ -726,7 +726,7 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
                       rate: float | str = "max", domain_id: int | None = None,
                       overrides: dict[str, dict[str, Any]] | None = None, settle_s: float = 0.5,
                       progress: bool = True, obs_model: str | None = None, split_per_mission: bool = False,
-                      archive_dir: str | None = None, replay_batch: int = 2000, async_publish: bool = True) -> dict:
+                      archive_dir: str | None = None, replay_batch: int = 500, async_publish: bool = False) -> dict:
     """Replay ``bags`` (in the given order) through twin, onboard, prognostic and ground nodes in one process.
 
     ``model_dir``: trained twin (ONNX) for the twin core and the onboard node
@@ -740,11 +740,11 @@ def run_stack_on_bags(bags: list[str | os.PathLike], model_dir: str | None = Non
     replay then pumps until the onboard node has taken all of them, so it
     must stay well below the reader history, ``rosutil.SENSOR_DEPTH``);
     ``async_publish``: the stack's writers use Fast DDS asynchronous
-    publication (the middleware's delivery runs in its own thread, beside
-    the Python executor: measured 1.3-1.5x faster max-rate replay on 2 cores);
-    order per topic and reliability are unchanged, and the replay waits at
-    every mission boundary until the onboard node has taken the mission
-    message and every sample before it.
+    publication (delivery in the middleware's thread; order per topic and
+    reliability unchanged; the replay waits at every mission boundary until
+    the onboard node has taken the mission message and every sample before
+    it). Off by default: ``hdphm bench replay`` measured it slower on 2 cores
+    (the delivery thread competes with the executor for the same cores).
 
     Returns a summary: per-topic counts published and recorded, flags
     (actuator, stamp, level, reason), per-actuator last health / RUL and the
@@ -840,18 +840,23 @@ def _split_ros_args(argv: list[str]) -> tuple[list[str], list[str]]:
 
 
 def _pop_domain(args) -> None:
-    """argparse REMAINDER also takes options written after the node name: move ``--domain-id N`` out."""
+    """argparse REMAINDER also takes options written after the node name: move ``--domain-id N`` (and, for
+    ``hdphm node``, ``--rt-priority N``) out."""
     ra = list(args.ros_args or [])
     end = ra.index("--ros-args") if "--ros-args" in ra else len(ra)
     head, tail = ra[:end], ra[end:]
-    for k, tok in enumerate(head):
-        if tok.startswith("--domain-id"):
-            val = tok.split("=", 1)[1] if "=" in tok else (head[k + 1] if k + 1 < len(head) else None)
-            if val is None or not val.lstrip("-").isdigit():
-                raise SystemExit(f"hdphm: --domain-id needs an integer, got {val!r}")
-            args.domain_id = int(val)
-            del head[k:k + (1 if "=" in tok else 2)]
-            break
+    opts = ("--domain-id", "--rt-priority") if hasattr(args, "rt_priority") else ("--domain-id",)
+    for opt in opts:
+        for k, tok in enumerate(head):
+            if tok == opt or tok.startswith(opt + "="):
+                val = tok.split("=", 1)[1] if "=" in tok else (head[k + 1] if k + 1 < len(head) else None)
+                if val is None or not val.lstrip("-").isdigit():
+                    raise SystemExit(f"hdphm: {opt} needs an integer, got {val!r}")
+                if opt == "--rt-priority" and not 0 <= int(val) <= 99:
+                    raise SystemExit(f"hdphm: --rt-priority {val} outside 0..99")
+                setattr(args, opt[2:].replace("-", "_"), int(val))
+                del head[k:k + (1 if "=" in tok else 2)]
+                break
     if head:
         raise SystemExit(f"hdphm: unexpected arguments {head}; node parameters go after --ros-args")
     args.ros_args = tail
@@ -864,6 +869,12 @@ def cmd_node(args) -> int:
     from hdphm import rosutil as ru
 
     _pop_domain(args)
+    if args.rt_priority:
+        # before the context: the middleware's receive threads inherit SCHED_FIFO (measured: the onboard
+        # node's p99 arrival -> flag latency follows the receive threads' scheduling on a loaded machine)
+        why = ru.set_thread_realtime(args.rt_priority)
+        print(f"hdphm node: {'SCHED_FIFO priority %d' % args.rt_priority if not why else 'not real-time: ' + why}",
+              file=sys.stderr)
     ctx = ru.init_context(args.domain_id, ros_args_for(args.name, args.ros_args))
     node = make_node(args.name, ctx)
     ex = ru.make_executor(ctx)
@@ -993,6 +1004,9 @@ def register(sub) -> None:
     p = sub.add_parser("node", help="run one stack node (onboard, prognostic, ground, twin)")
     p.add_argument("name", choices=NODES)
     p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default $ROS_DOMAIN_ID)")
+    p.add_argument("--rt-priority", type=int, default=0, choices=range(0, 100), metavar="0-99",
+                   help="run the process SCHED_FIFO at this priority (middleware receive threads included; "
+                        "worker threads stay normal); needs CAP_SYS_NICE; 0: normal scheduling")
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args -p name:=value ...")
     p.set_defaults(func=cmd_node)
 

@@ -165,6 +165,29 @@ def init_context(domain_id: int | None = None, args: list[str] | None = None):
     return ctx
 
 
+def set_thread_realtime(priority: int) -> str:
+    """Put the calling thread under ``SCHED_FIFO`` at ``priority`` (1-99; 0: ``SCHED_OTHER``).
+
+    Threads created afterwards by this thread inherit the policy (the
+    middleware's receive threads, when called before the context's first
+    node). Returns "" on success, else why it was not possible (no Linux, no
+    CAP_SYS_NICE / RLIMIT_RTPRIO): the caller logs it and runs on, unprioritised.
+    """
+    priority = int(priority)
+    if not 0 <= priority <= 99:
+        raise ValueError(f"real-time priority {priority} outside 0..99")
+    if not hasattr(os, "sched_setscheduler"):
+        return "SCHED_FIFO is not available on this platform"
+    try:
+        if priority == 0:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        else:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as e:
+        return f"SCHED_FIFO priority {priority} refused ({e.strerror}; needs CAP_SYS_NICE or an rtprio limit)"
+    return ""
+
+
 PUBLICATION_MODE_ENV = "RMW_FASTRTPS_PUBLICATION_MODE"
 
 
