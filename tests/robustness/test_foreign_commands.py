@@ -144,6 +144,14 @@ def test_discover_without_torque_sensor_uses_tau_m_only(foreign_bags, tmp_path, 
     assert [s["signal"] for s in rep["signals"]] == ["tau_m"]
 
 
+def test_discover_leaves_out_the_twist_of_encoders_without_common_zero(foreign_bags, tmp_path, capsys):
+    out = tmp_path / "disc"
+    assert main(["discover", str(foreign_bags["theta_offset"]), "--out", str(out), "--no-plots"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert [s["signal"] for s in rep["signals"]] == ["tau_m"]
+    assert any("common zero" in s for s in rep["data_notes"])
+
+
 def test_onboard_eval_runs_on_foreign_bags(foreign_bags, tmp_path, capsys):
     bags = [str(foreign_bags[n]) for n in ("plain", "rosbags", "no_torque", "no_temp", "dropout")]
     rc = main(["onboard", "eval", *bags, "--out", str(tmp_path / "ob"), "--quiet"])

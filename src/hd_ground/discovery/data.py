@@ -94,6 +94,18 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02) -> tuple[dic
     # delta_m = ... - r_m phi), so K and c come out positive
     s["windup"] = -s["phi"]
     s["windup_dot"] = -s["phi_dot"]
+    from hd_bag.mission import MAX_TWIST_OFFSET
+
+    ph = s["phi"][np.isfinite(s["phi"])]
+    if len(ph) and abs(float(np.median(ph))) > MAX_TWIST_OFFSET:
+        # motor and output encoders without a common zero: the twist is off by a constant far
+        # beyond any wind-up, so neither the twist terms nor Q_red (modelled through them) can be
+        # analysed; the motor side (tau_m vs theta_m, omega_m) is unaffected
+        notes.append(f"{name}: theta_f - theta_m / N has median {float(np.median(ph)):.6g} rad (> {MAX_TWIST_OFFSET:g} "
+                     "rad: encoders without a common zero); twist and Q_red left out of the analysis")
+        for k in ("phi", "phi_dot", "windup", "windup_dot", "Q_red"):
+            s[k] = np.full(n, np.nan)
+        s.pop("Q_red_over_N", None)
     temp = m.temperature_on_t("gearbox")
     if np.any(np.isfinite(temp)):
         s["temperature"] = temp
