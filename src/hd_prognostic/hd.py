@@ -173,7 +173,17 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
         mi = np.arange(len(rows))
         for r, k in zip(rows, mi):
             r["mission_index"] = int(k)
-    a = ActuatorData(aid, [r["path"] for r in rows], mi, np.array([r["operating_hours"] for r in rows]), rows, errors)
+    oh = np.array([r["operating_hours"] for r in rows], float)
+    back = np.flatnonzero(np.diff(oh) < 0)
+    if len(back):
+        # another tool's counters disagree: the filter follows mission_index; say where hours run back
+        i = int(back[0])
+        msg = (f"{bag_dir}: operating_hours decrease along mission_index in {len(back)} places (e.g. mission "
+               f"{int(mi[i])}: {oh[i]:g} h -> mission {int(mi[i + 1])}: {oh[i + 1]:g} h, {rows[i + 1]['path']}); "
+               "missions ordered by mission_index, hours not used for the order")
+        print(f"warning: {msg}", file=sys.stderr)
+        errors.append(msg)
+    a = ActuatorData(aid, [r["path"] for r in rows], mi, oh, rows, errors)
     if include_truth:
         a.h_true = np.asarray(truth)[o]
         hf = np.asarray(h_fail)
@@ -319,6 +329,15 @@ def mission_sequence(a: ActuatorData, obs: ObservationModel) -> tuple[np.ndarray
     return full.astype(float), y, expo
 
 
+def _hours_per_mission(hours: np.ndarray, mission_index: np.ndarray) -> float | None:
+    """Median operating hours per mission over the forward steps (None when the hours never advance)."""
+    if len(hours) < 2:
+        return None
+    r = np.diff(hours) / np.diff(mission_index)
+    r = r[np.isfinite(r) & (r > 0)]
+    return float(np.median(r)) if len(r) else None
+
+
 PF_DEFAULTS = dict(likelihood="student_t", roughening=0.05, kernel="gordon", discount=0.98)
 #: the joint estimator (offset state, Liu-West kernel, h = kappa U, predictive prior): better wear
 #: tracking, RUL accuracy not better (README "Joint offset estimator")
@@ -371,7 +390,7 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
     hist.meta.update({
         "notes": notes,
         "actuator_id": a.actuator_id, "feature": obs.feature, "n_bags": len(a.paths), "skipped_bags": a.errors,
-        "hours_per_mission": float(np.median(np.diff(hours) / np.diff(a.mission_index))) if len(hours) > 1 else None,
+        "hours_per_mission": _hours_per_mission(hours, a.mission_index),
         "likelihood": likelihood,
     })
     return hist

@@ -111,6 +111,27 @@ def test_prognose_skips_an_unreadable_bag_with_a_note(foreign_actuator, foreign_
     assert any("broken.mcap" in s and "stamp" in s for s in h["meta"]["skipped_bags"])
 
 
+def test_prognose_when_mission_counters_disagree(tmp_path, capsys):
+    """Hours running back along mission_index, and a tool that leaves every mission_index at 0."""
+    plain = FB.replace(FB.VARIANTS["plain"], sim={"duration": 1.0})
+    for k, (mi, oh) in enumerate([(0, 10.0), (1, 5.0), (2, 30.0), (3, 20.0)]):
+        FB.write_variant(tmp_path / "hours", FB.replace(plain, name=f"m{k}"), seed=k, mission_index=mi,
+                         operating_hours=oh, actuator_id="FX-H")
+    for k, oh in enumerate([30.0, 10.0, 20.0]):
+        FB.write_variant(tmp_path / "zero", FB.replace(plain, name=f"z{k}"), seed=k, mission_index=0,
+                         operating_hours=oh, actuator_id="FX-Z")
+    assert main(["prognose", str(tmp_path / "hours"), "--out", str(tmp_path / "ph"), "--no-plots",
+                 "--particles", "300"]) == 0
+    h = json.loads((tmp_path / "ph" / "rul_history.json").read_text())
+    assert h["t"] == [0.0, 1.0, 2.0, 3.0] and h["meta"]["hours_per_mission"] == 25.0
+    assert any("operating_hours decrease" in s for s in h["meta"]["skipped_bags"])
+    assert main(["prognose", str(tmp_path / "zero"), "--out", str(tmp_path / "pz"), "--no-plots",
+                 "--particles", "300"]) == 0
+    h = json.loads((tmp_path / "pz" / "rul_history.json").read_text())
+    assert h["t"] == [0.0, 1.0, 2.0] and h["meta"]["hours_per_mission"] == 10.0  # renumbered in hours order
+    assert any("duplicate mission_index" in s for s in h["meta"]["skipped_bags"])
+
+
 def test_prognose_on_an_empty_or_missing_folder(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert main(["prognose", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) != 0
