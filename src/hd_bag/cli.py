@@ -175,7 +175,9 @@ def _inspect(args) -> int:
         for name, md in s["metadata"].items():
             print(f"  metadata {name}:")
             for k, v in md.items():
-                print(f"    {k} = {v}")
+                lines = str(v).splitlines() or [""]
+                # a foreign tool's record may hold a whole document (rosbags: 'rosbag2' YAML): first line only
+                print(f"    {k} = {lines[0]}" + (f"  ... ({len(lines)} lines)" if len(lines) > 1 else ""))
         for i in s["issues"]:
             print(f"  issue: {i}")
         try:
