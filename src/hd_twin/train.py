@@ -563,6 +563,11 @@ def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
         used += 1
     if not segs:
         raise ValueError("no usable segment in the given missions: " + "; ".join(notes))
+    F_all = np.concatenate([s_.F for s_ in segs])
+    absent = [nm for j, nm in enumerate(names) if not np.isfinite(F_all[:, j]).any()]
+    if absent:
+        notes.append(f"network inputs {absent} not available in these bags (no /hd/command, no /hd/temperature, "
+                     "...): replaced by their training mean, as the onboard runtime does")
     oor = out_of_range(norm, segs, names)
     if oor:
         worst = ", ".join(f"{k} ({v['frac']:.0%} of samples, up to {v['max_z']:.3g} sigma)" for k, v in oor.items())

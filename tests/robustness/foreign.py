@@ -388,6 +388,18 @@ def v_meta_spacing(s: Streams, seed: int = 0) -> Streams:
     return replace(s, meta=meta)
 
 
+def v_no_command(s: Streams, seed: int = 0) -> Streams:
+    """A rig without a position command topic (torque-controlled test bench)."""
+    return replace(s, cmd_stamp=s.cmd_stamp[:0], theta_ref=s.theta_ref[:0])
+
+
+def v_sim_time(s: Streams, seed: int = 0) -> Streams:
+    """Stamps from a simulation clock that starts at 0 s (``use_sim_time``), not wall-clock time."""
+    t0 = int(s.js_stamp.min())
+    return replace(s, js_stamp=s.js_stamp - t0, cmd_stamp=s.cmd_stamp - t0,
+                   temps=[(f, tt - t0, vv) for f, tt, vv in s.temps])
+
+
 # broken on purpose: must give a clear error, never a traceback
 def v_no_joint_states(s: Streams, seed: int = 0) -> Streams:
     return replace(s, js_stamp=s.js_stamp[:0], js=s.js[:0])
@@ -445,6 +457,8 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in [
     Variant("theta_offset", "theta_m offset by 1e4 rad alone (encoders without a common zero)",
             vary=v_theta_m_offset, expect="flagged", match="common zero"),
     Variant("extra_topics", "/tf and /rosout in the bag", vary=v_extra_topics),
+    Variant("no_command", "no /hd/command topic", vary=v_no_command),
+    Variant("sim_time", "stamps from a clock starting at 0 s", vary=v_sim_time),
     Variant("names_reversed", "joint names [output, motor]", vary=v_names_reversed),
     Variant("meta_sloppy", "padded metadata strings, extra keys", vary=v_meta_spacing),
     Variant("no_joint_states", "no /hd/joint_states", vary=v_no_joint_states, expect="error",

@@ -16,8 +16,8 @@ from hdphm.cli import main
 from tests.robustness import foreign as FB
 
 #: variants the 1 kHz twin must score without a note (same hardware, same rate family)
-EVAL_CLEAN = ["plain", "rosbags", "lz4", "unchunked", "jitter", "no_temp", "dup_disorder", "extra_topics",
-              "names_reversed"]
+EVAL_CLEAN = ["plain", "rosbags", "lz4", "unchunked", "jitter", "dup_disorder", "extra_topics", "names_reversed",
+              "sim_time"]
 
 
 def _eval(capsys, model, *bags):
@@ -33,6 +33,13 @@ def test_twin_eval_scores_foreign_bags(foreign_twin, foreign_bags, name, capsys)
     assert rc == 0 and met["n_missions"] == 1
     assert math.isfinite(met["rmse"]) and met["r2"] > 0.3, met
     assert "notes" not in met
+
+
+@pytest.mark.parametrize("name,feature", [("no_temp", "temperature"), ("no_command", "e_ref")])
+def test_twin_eval_without_a_sensor_says_so(foreign_twin, foreign_bags, name, feature, capsys):
+    rc, met, _ = _eval(capsys, foreign_twin, foreign_bags[name])
+    assert rc == 0 and met["r2"] > 0.3
+    assert any("not available" in s and feature in s for s in met["notes"]), met.get("notes")
 
 
 def test_twin_eval_across_a_dropout(foreign_twin, foreign_bags, capsys):
