@@ -103,6 +103,9 @@ def test_missing_topic_nan_dropout_disorder_twin_update_restart(bags, domain_id)
                 # a max-speed replay would otherwise finish before DDS discovery matches
                 # the new subscription (seen on a loaded CI machine: 0 messages received)
                 assert _pump_until(st, lambda: pub.get_subscription_count() >= 1, 15.0)
+                # and the reader side has matched the writer too (discovery is two-sided; a reader that has
+                # not matched yet discards what the writer already sends it)
+                assert _pump_until(st, lambda: st.nodes["onboard"].sub_js.get_publisher_count() >= 1, 15.0)
             return pay
 
         rep = Replayer(st.aux, "max", pump=st.pump)
