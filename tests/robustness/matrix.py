@@ -57,6 +57,9 @@ def cell_eval(model: str, p: str) -> str:
         note = "; out of range: " + ",".join(m["out_of_range"])
     if any("gear ratio" in s for s in m.get("notes", [])):
         note += "; note: other N"
+    for s in m.get("notes", []):
+        if "not available" in s:
+            note += "; note: no " + s.split("[", 1)[1].split("]", 1)[0].replace("'", "")
     return f"rc 0, R² {m['r2']:.2f}{note}"
 
 
