@@ -464,7 +464,9 @@ class Recorder:
         previous file even when the readers deliver the two topics in another order."""
         from hdphm import rosutil as ru
 
-        held = [(first, first_src)]
+        # take everything this topic has queued first: a mission boundary below takes the queued
+        # messages of every contract topic, and would otherwise file ours ahead of ``first``
+        held = [(first, first_src)] + self._take_with_src(sub)
         msub = self.subs.get(ru.TOPIC_MISSION)
         if msub is not None:
             for mmsg, msrc in self._take_with_src(msub):
