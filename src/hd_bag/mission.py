@@ -84,6 +84,10 @@ class ReadReport:
     #: means the two encoders are not co-referenced: twist-based estimates are meaningless.
     twist_offset: float = float("nan")
     notes: list[str] = field(default_factory=list)  # human-readable account of every action
+    #: readable, but the signals disagree with each other or with the contract (encoders without
+    #: a common zero, speeds not the derivative of the angles, Q_red sign): results derived from
+    #: this mission are doubtful; commands that use it repeat these lines in their output
+    suspect: list[str] = field(default_factory=list)
 
     def summary(self) -> str:
         lines = [f"{self.path}:"]

@@ -140,6 +140,9 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
             errors.append(f"{b}: {e}")
             print(f"warning: skipping {b}: {e}", file=sys.stderr)
             continue
+        for x in getattr(m.report, "suspect", []):
+            errors.append(f"{b}: suspect data (used anyway): {x}")
+            print(f"warning: {b}: suspect data: {x}", file=sys.stderr)
         if aid is None:
             aid = m.meta.actuator_id
         elif m.meta.actuator_id != aid:

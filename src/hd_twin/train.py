@@ -556,6 +556,7 @@ def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
                 raise
             notes.append(f"skipped: {e}")  # one unusable bag of many: say so, score the others
             continue
+        notes += [f"{where}: suspect data: {x}" for x in getattr(m.report, "suspect", [])]
         if np.isfinite(N_model) and abs(float(m.meta.gear_ratio) - N_model) > 1e-6 * N_model:
             notes.append(f"{where}: gear ratio N = {float(m.meta.gear_ratio):g} differs from the N = {N_model:g} "
                          "the model was trained on: the physics uses the bag's N, the network extrapolates")

@@ -28,7 +28,7 @@ def _ros2_writer_bag(path, *, meta=None, topics=("js", "cmd", "temp"), js_type="
             if "js" in topics:
                 if js_type.endswith("JointState"):
                     msg = {"header": hdr, "name": list(names), "position": [0.01 * i * 100, 0.01 * i][:len(names)],
-                           "velocity": [1.0, 0.01][:len(names)], "effort": [0.1, 2.0][:len(names)]}
+                           "velocity": [1000.0, 10.0][:len(names)], "effort": [0.1, 2.0][:len(names)]}
                 else:
                     msg = {"data": 1.0}
                 w.write_message("/hd/joint_states", js, msg, log_time=st, publish_time=st)

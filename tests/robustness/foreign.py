@@ -400,6 +400,20 @@ def v_sim_time(s: Streams, seed: int = 0) -> Streams:
                    temps=[(f, tt - t0, vv) for f, tt, vv in s.temps])
 
 
+def v_speed_rpm(s: Streams, seed: int = 0) -> Streams:
+    """A logger that writes both speeds in rpm instead of rad/s."""
+    js = s.js.copy()
+    js[:, 2:4] *= 60.0 / (2.0 * math.pi)
+    return replace(s, js=js)
+
+
+def v_torque_sign(s: Streams, seed: int = 0) -> Streams:
+    """Output torque sensor mounted the other way round (Q_red sign reversed)."""
+    js = s.js.copy()
+    js[:, 5] *= -1.0
+    return replace(s, js=js)
+
+
 # broken on purpose: must give a clear error, never a traceback
 def v_no_joint_states(s: Streams, seed: int = 0) -> Streams:
     return replace(s, js_stamp=s.js_stamp[:0], js=s.js[:0])
@@ -456,6 +470,10 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in [
     Variant("theta_large", "theta_m near 1e4 rad, theta_f co-referenced (+1e4/N)", vary=v_theta_large),
     Variant("theta_offset", "theta_m offset by 1e4 rad alone (encoders without a common zero)",
             vary=v_theta_m_offset, expect="flagged", match="common zero"),
+    Variant("speed_rpm", "omega_m, omega_f in rpm (unit error)", vary=v_speed_rpm, expect="flagged",
+            match="in rpm?"),
+    Variant("torque_sign", "Q_red sign reversed (sensor mounted the other way)", vary=v_torque_sign,
+            expect="flagged", match="sign reversed?"),
     Variant("extra_topics", "/tf and /rosout in the bag", vary=v_extra_topics),
     Variant("no_command", "no /hd/command topic", vary=v_no_command),
     Variant("sim_time", "stamps from a clock starting at 0 s", vary=v_sim_time),

@@ -163,6 +163,22 @@ def test_large_co_referenced_angles_read_exactly(foreign_bags):
     assert [v for v in validate_bag(foreign_bags["theta_large"]) if v.severity == "error"] == []
 
 
+@pytest.mark.parametrize("name", FLAGGED)
+def test_unit_sign_and_reference_errors_are_flagged(foreign_bags, name, capsys):
+    """Readable, but the signals contradict each other: validate error (exit 1), report.suspect says why."""
+    p = str(foreign_bags[name])
+    m = read_mission(p)
+    assert any(VARIANTS[name].match in x for x in m.report.suspect), m.report.suspect
+    assert main(["validate", p]) == 1
+    out = capsys.readouterr().out
+    assert VARIANTS[name].match in out and p in out
+
+
+def test_consistency_checks_stay_quiet_on_good_bags(foreign_bags):
+    for name in OK:
+        assert read_mission(foreign_bags[name]).report.suspect == [], name
+
+
 def test_encoders_without_common_zero_are_flagged(foreign_bags, capsys):
     p = str(foreign_bags["theta_offset"])
     m = read_mission(p)  # readable: the signals themselves are fine

@@ -42,6 +42,12 @@ def test_twin_eval_without_a_sensor_says_so(foreign_twin, foreign_bags, name, fe
     assert any("not available" in s and feature in s for s in met["notes"]), met.get("notes")
 
 
+@pytest.mark.parametrize("name", ["speed_rpm", "torque_sign"])
+def test_twin_eval_repeats_suspect_data(foreign_twin, foreign_bags, name, capsys):
+    rc, met, _ = _eval(capsys, foreign_twin, foreign_bags[name])
+    assert rc == 0 and any("suspect data" in s and FB.VARIANTS[name].match in s for s in met["notes"])
+
+
 def test_twin_eval_across_a_dropout(foreign_twin, foreign_bags, capsys):
     """5 s mission with a 2 s hole: both segments scored (3000 samples), nothing bridged."""
     rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["dropout"])
