@@ -344,19 +344,20 @@ def study_table(study: dict, fa: dict | None = None) -> str:
 def main(argv=None) -> int:
     """``python -m hd_onboard.evaluate study --healthy DIR [--n 6] [--actuator 2] [--seed0 40] --out DIR``."""
     import argparse
-    import sys
 
     ap = argparse.ArgumentParser(prog="python -m hd_onboard.evaluate",
                                  description="onboard detection study: delay per fault and severity + false alarms")
     ap.add_argument("what", choices=("study",))
-    ap.add_argument("--healthy", nargs="*", default=[], help="healthy bags / dirs for the false-alarm count")
-    ap.add_argument("--n", type=int, default=6, help="fault missions per case")
-    ap.add_argument("--actuator", type=int, default=2)
-    ap.add_argument("--pop-seed", type=int, default=7)
-    ap.add_argument("--seed0", type=int, default=40)
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=V", help="OnboardConfig field")
-    ap.add_argument("--out", default="")
-    a = ap.parse_args(argv)
+    from hd_onboard.study_args import add_study_args
+
+    add_study_args(ap)
+    return run_study(ap.parse_args(argv))
+
+
+def run_study(a) -> int:
+    """Run the study for parsed :func:`add_study_args` options; print the table, write JSON + PNG."""
+    import sys
+
     kw = {}
     for kv in a.set:
         k, _, v = kv.partition("=")

@@ -39,17 +39,6 @@ PARAMS: dict[str, Any] = {
     "actuator_id": "",  # hardware_id until /hd/mission says otherwise ("" -> header.frame_id or "unknown")
     "gear_ratio": 0.0,  # N; 0 -> from /hd/mission or the twin parameters
     "model_dir": "",  # trained twin (ONNX); "" -> physics-only stand-in
-    "window_s": 1.0,
-    "ewma_tau_s": 0.1,
-    "persistence_s": 0.05,
-    "hold_s": 2.0,
-    "warmup_s": 5.0,
-    "settle_s": 0.05,
-    "max_gap_samples": 10,
-    "nominal_fs": 0.0,
-    "accel_cutoff_hz": 50.0,
-    "default_h_warn": 3.0,
-    "default_h_error": 6.0,
     "diag_period_s": 0.5,  # s of sample time between periodic /diagnostics
     "stale_timeout_s": 2.0,  # s
     "max_block": 2000,  # samples per core call
@@ -60,6 +49,19 @@ PARAMS: dict[str, Any] = {
     "rt_priority": 0,  # 1-99: the joint-state thread (rt_thread) runs SCHED_FIFO at this priority (0: normal)
     "latency_probe": False,  # bench only: record wall-clock now - header.stamp per sample (stamps must be wall time)
 }
+
+
+def _config_params() -> dict[str, Any]:
+    """Every :class:`hd_onboard.core.OnboardConfig` field as a node parameter, with the core's default
+    (one source for detection settings: the node never carries its own copy of them)."""
+    import dataclasses
+
+    from hd_onboard.core import OnboardConfig
+
+    return {f.name: f.default for f in dataclasses.fields(OnboardConfig)}
+
+
+PARAMS.update(_config_params())
 
 
 def declare(node, params: dict[str, Any]) -> dict[str, Any]:
@@ -465,6 +467,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             sts.insert(0, diag_status("hdphm/onboard/fault", lev, msg, hid,
                                       {"mission_index": self.meta.get("mission_index", ""), "twin": core.expected.kind,
                                        "twin_version": core.expected.version, "onset_stamp_s": (core.onset_ns or 0) * 1e-9}))
+            for name, st in (("stiffness", core.stiffness_status()), ("friction", core.friction_status())):
+                lev_m = int(st["level"])
+                sts.append(diag_status(f"hdphm/onboard/{name}", lev_m, f"{LEVEL_NAMES[lev_m]}; reference {st['reference']}",
+                                       hid, {k: v for k, v in st.items() if k != "level"}))
             for t in ru.CONTRACT_TOPICS:
                 sts.append(self._input_status(t, stale_js))
             self._publish_diag(sts)

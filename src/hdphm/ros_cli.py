@@ -990,6 +990,12 @@ def _cmd_onboard_eval(args) -> int:
     return cmd_eval(args)
 
 
+def _cmd_onboard_study(args) -> int:
+    from hd_onboard.evaluate import run_study
+
+    return run_study(args)
+
+
 def register(sub) -> None:
     p = sub.add_parser("onboard", help="onboard detector tools (eval: false-alarm rate over healthy bags)")
     osub = p.add_subparsers(dest="onboard_command", metavar="ONBOARDCOMMAND")
@@ -1002,6 +1008,11 @@ def register(sub) -> None:
     pe.add_argument("--out", default="", help="write onboard_eval.json and onboard_eval.png here")
     pe.add_argument("--quiet", action="store_true")
     pe.set_defaults(func=_cmd_onboard_eval)
+    ps = osub.add_parser("study", help="detection delay per fault and severity on simulated faults + false alarms")
+    from hd_onboard.study_args import add_study_args
+
+    add_study_args(ps)
+    ps.set_defaults(func=_cmd_onboard_study)
 
     p = sub.add_parser("node", help="run one stack node (onboard, prognostic, ground, twin)")
     p.add_argument("name", choices=NODES)
