@@ -27,7 +27,17 @@ never interpolated), NaN (kept), isolated values beyond physical limits (set to
 NaN; validate: error per sample), a sample rate outside 100 Hz to 20 kHz
 (validate: error), missing ``/hd/command`` or ``/hd/temperature`` (empty arrays),
 temperature frames other than ``motor_winding``/``gearbox`` (skipped; validate:
-error), missing ``offered_qos_profiles`` (validate: warning).
+error), missing ``offered_qos_profiles`` (validate: warning). Stamp jitter is
+measured (robust sigma of the steps) and a step counts as a dropout only beyond
+1.5 periods and 3 jitter sigmas.
+
+What the reader *flags* (readable, ``report.suspect``; validate: error): signals
+that contradict each other or the contract, as other tools' unit and sign
+mistakes do: ``theta_f - theta_m / N`` beyond ``MAX_TWIST_OFFSET`` (encoders
+without a common zero), speeds that are not the derivative of the angles
+(``SPEED_SCALE_BAND``: rpm, deg/s, reversed sign), ``Q_red`` anti-correlated
+with the wind-up (torque sensor sign; validate: warning, the contract page does
+not state that sign).
 """
 
 from __future__ import annotations
@@ -442,9 +452,11 @@ def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: fl
     if ok.sum() >= 50 and np.std(wu[ok]) > 0 and np.std(M[ok, 5]) > 0:
         r = float(np.corrcoef(wu[ok], M[ok, 5])[0, 1])
         if r < -0.5:
-            msg = (f"Q_red is anti-correlated with the wind-up theta_m / N - theta_f (r = {r:.2f}); the contract "
-                   "has them in the same direction: torque sensor sign reversed?")
-            raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg))
+            msg = (f"Q_red is anti-correlated with the wind-up theta_m / N - theta_f (r = {r:.2f}); the plant "
+                   "transmits torque in the direction of the wind-up: torque sensor sign reversed?")
+            # a warning, not an error: the contract fixes the sign of Q_red against theta_f, not against
+            # the wind-up (the sign follows from the physics, not from the page)
+            raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg, "warning"))
             rep.notes.append(msg)
             rep.suspect.append(msg)
 

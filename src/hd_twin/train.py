@@ -165,7 +165,13 @@ def resolve_params(cfg: TrainConfig, missions: Sequence) -> ph.TwinParams:
 
 
 def fs_model_for(missions: Sequence, fs_target: float | None) -> float:
-    fs = float(np.median([m.fs for m in missions]))
+    """Model sample rate [Hz]: the lowest bag rate (a higher rate reaches it by integer decimation,
+    checked per bag in ``preprocess``), lowered by an integer factor toward ``fs_target``.
+
+    (The median rate was used before: with bags at 100 Hz and 10 kHz it gave 5050 Hz, which no
+    bag can be decimated to.)
+    """
+    fs = float(min(m.fs for m in missions))
     if fs_target is None or fs <= fs_target:
         return fs
     return fs / max(1, int(round(fs / fs_target)))
@@ -340,7 +346,11 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     if set(tr_idx) & set(va_idx):
         raise ValueError("training and validation missions overlap")
     params = resolve_params(cfg, [missions[i] for i in tr_idx])
-    fs_model = fs_model_for([missions[i] for i in tr_idx], cfg.fs_target)
+    fs_model = fs_model_for(missions, cfg.fs_target)  # validation missions must reach it too
+    rates = sorted({round(float(m.fs), 1) for m in missions})
+    if rates[-1] > 1.01 * rates[0]:
+        print(f"note: bags at {rates} Hz; model rate {fs_model:.5g} Hz (the lowest), higher rates decimated",
+              file=sys.stderr)
     t0 = time.perf_counter()
     segs_by_m = {}
     for k, i in enumerate(list(tr_idx) + list(va_idx)):

@@ -169,7 +169,8 @@ def test_unit_sign_and_reference_errors_are_flagged(foreign_bags, name, capsys):
     p = str(foreign_bags[name])
     m = read_mission(p)
     assert any(VARIANTS[name].match in x for x in m.report.suspect), m.report.suspect
-    assert main(["validate", p]) == 1
+    # the Q_red sign against the wind-up is physics, not written on the contract page: a warning
+    assert main(["validate", p]) == (0 if name == "torque_sign" else 1)
     out = capsys.readouterr().out
     assert VARIANTS[name].match in out and p in out
 

@@ -83,6 +83,23 @@ def test_twin_eval_notes_other_hardware_and_out_of_range_inputs(foreign_twin, fo
     assert any("outside the training data" in s for s in met["notes"])
 
 
+def test_train_on_mixed_sample_rates_uses_the_lowest(foreign_bags, tmp_path, capsys):
+    """100 Hz + 1 kHz + 10 kHz bags: one model rate every bag reaches by integer decimation (was the median)."""
+    import shutil
+
+    d = tmp_path / "bags"
+    d.mkdir()
+    for n in ("fs100", "plain", "fs10k"):
+        shutil.copy(foreign_bags[n], d / f"{n}.mcap")
+    rc = main(["train", "--preset", "tiny", "--bags", str(d), "--epochs", "1", "--threads", "1",
+               "--out", str(tmp_path / "m")])
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    cfg = json.loads((tmp_path / "m" / "config.json").read_text())
+    assert cfg["preprocessing"]["fs_model"] == pytest.approx(100.0, rel=1e-6)
+    assert "model rate 100 Hz (the lowest)" in err
+
+
 def test_train_refuses_a_folder_with_an_unusable_bag(foreign_bags, tmp_path, capsys):
     import shutil
 
