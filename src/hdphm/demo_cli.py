@@ -155,7 +155,9 @@ def _print_report(rep: dict, summary: dict) -> None:
               f"R^2 {tw.get('r2', float('nan')):.4f}")
     st = rep["stack"]
     print(f"stack: expected response from '{st.get('twin')}', replay {st.get('speedup', float('nan')):.1f}x real time, "
-          f"{st.get('n_warn', 0)} WARN and {st.get('n_error', 0)} ERROR flags")
+          f"{st.get('n_warn', 0)} WARN and {st.get('n_error', 0)} ERROR flags "
+          "(onboard flags are for abrupt faults against each mission's reference; the gradual wear of this life "
+          "is the prognostic node's health and RUL below)")
     flags = summary.get("flags") or []
     for f in flags[:10]:
         print(f"  flag level {f['level']} at t={f['stamp_s']:.3f} s: {f['reason']}")
