@@ -53,7 +53,8 @@ from typing import Any
 import numpy as np
 
 from hd_onboard.detector import (ERROR, OK, WARN, ChannelDetector, ChannelThreshold, FrictionMonitor, LevelLatch,
-                                  StiffnessMonitor, StiffnessReference, fit_friction_reference, fit_stiffness_reference)
+                                  FrictionReference, StiffnessMonitor, StiffnessReference, fit_friction_reference,
+                                  fit_stiffness_reference)
 from hd_onboard.expected import I_REF, I_TEMP, PhysicsStandInExpected
 from hd_twin import physics as ph
 
@@ -222,6 +223,7 @@ class OnboardCore:
         self.window_jobs: list[WindowJob] = []
         self._given_thresholds = dict(thresholds or {})
         self._given_stiff_ref: StiffnessReference | None = None
+        self._given_fric_ref: FrictionReference | None = None
         self.reset_mission()
 
     # ---- configuration -----------------------------------------------------
@@ -241,12 +243,41 @@ class OnboardCore:
     def set_stiffness_reference(self, ref: "StiffnessReference | dict | None") -> None:
         """Healthy torsion law given by the ground (None: learn it on each mission's warm-up again).
 
-        Takes effect at the next mission start (the encoder offset ``a`` is re-estimated on
-        that mission's warm-up); a dict is validated (:meth:`StiffnessReference.from_dict`).
+        A ground reference wins over the warm-up's: it is applied at once (the monitor's moments
+        restart: a twin update arriving mid-mission) and at every mission start, where the monitor
+        then runs from the first sample instead of after the warm-up, so a stiffness loss already
+        present at mission start is measured against the healthy law (the warm-up would learn the
+        damaged one). The offset ``a`` is the ground's; the monitor's regression has its own
+        intercept, so per-mission encoder offsets do not bias the compliance ratio. A dict is
+        validated (:meth:`StiffnessReference.from_dict`); None takes effect at the next mission.
         """
         if isinstance(ref, dict):
             ref = StiffnessReference.from_dict(ref, "onboard stiffness reference")
+        if ref is not None and not isinstance(ref, StiffnessReference):
+            raise ValueError(f"onboard stiffness reference: expected StiffnessReference or dict, got {type(ref).__name__}")
         self._given_stiff_ref = ref
+        if ref is not None:
+            self.stiffness.ref = ref
+            self.stiffness.reset()
+            self._stiff_t0 = 0.0
+
+    def set_friction_reference(self, ref: "FrictionReference | dict | None") -> None:
+        """Healthy friction mismatch given by the ground (None: learn it on each mission's warm-up again).
+
+        Same rules as :meth:`set_stiffness_reference`: applied at once (moments restart) and at every
+        mission start, monitoring from the first sample. The reference must have been fitted on residuals
+        of the same twin (parameters and model) as this core's: the ground fits it with the parameters it
+        pushes in the same update. A dict is validated (:meth:`FrictionReference.from_dict`).
+        """
+        if isinstance(ref, dict):
+            ref = FrictionReference.from_dict(ref, "onboard friction reference")
+        if ref is not None and not isinstance(ref, FrictionReference):
+            raise ValueError(f"onboard friction reference: expected FrictionReference or dict, got {type(ref).__name__}")
+        self._given_fric_ref = ref
+        if ref is not None:
+            self.friction.ref = ref
+            self.friction.reset()
+            self._fric_t0 = 0.0
 
     def stiffness_status(self) -> dict[str, Any]:
         """State of the stiffness monitor for ``/diagnostics`` (``hdphm/onboard/stiffness``).
@@ -326,6 +357,11 @@ class OnboardCore:
         self.friction = FrictionMonitor(cfg.fric_tau_s, cfg.fric_excess_warn, cfg.fric_excess_error, 1,
                                         cfg.fric_min_var_u)
         self._fric_warm = _Buf(2, 8192)  # (r_Q, omega_m) of the warm-up
+        # a ground reference: monitor from the first sample; else from the end of the warm-up that learns it
+        self.stiffness.ref = self._given_stiff_ref
+        self.friction.ref = self._given_fric_ref
+        self._stiff_t0 = 0.0 if self._given_stiff_ref is not None else cfg.warmup_s  # s since mission start
+        self._fric_t0 = 0.0 if self._given_fric_ref is not None else cfg.warmup_s
         self._warm_q_std = math.nan
         self._configure_rates()
         self._x1 = np.full(7, np.nan)
@@ -493,7 +529,7 @@ class OnboardCore:
         stiff = np.full(n, np.nan)
         sw = np.zeros(n, bool)
         if self.stiffness.ref is not None:
-            after = t >= cfg.warmup_s
+            after = t >= self._stiff_t0
             if after.any():
                 stiff[after], sw[after], se_ = self.stiffness.step(twist_raw[after], Q_for_twist[after], V[after, 2],
                                                                    evaluate[after])
@@ -503,7 +539,7 @@ class OnboardCore:
         fric = np.full(n, np.nan)
         fw = np.zeros(n, bool)
         if self.friction.ref is not None:
-            after = t >= cfg.warmup_s
+            after = t >= self._fric_t0
             if after.any():
                 fric[after], fw[after], fe_ = self.friction.step(r_Q[after], V[after, 2], evaluate[after])
                 cw |= fw
@@ -535,17 +571,12 @@ class OnboardCore:
         self._settle_until = t_s + self.cfg.settle_s
 
     def _stiffness_reference(self) -> None:
-        """End of the warm-up: the healthy torsion law (learnt, or the ground's with this mission's offset)."""
+        """End of the warm-up: the healthy torsion law learnt on it (kept: the ground's, when given)."""
         w = self._stiff_warm.take()
         cfg = self.cfg
         q = w[:, 1][np.isfinite(w[:, 1])]
         self._warm_q_std = float(np.std(q)) if len(q) > 1 else math.nan  # N*m, scale of the self-calibration floor
         if self._given_stiff_ref is not None:
-            r = self._given_stiff_ref
-            ok = np.isfinite(w).all(axis=1)
-            if ok.sum() >= 50:
-                off = w[ok, 0] - r.g(w[ok, 1]) - r.b * np.tanh(w[ok, 2] / r.eps)
-                self.stiffness.ref = StiffnessReference.from_dict({**r.to_dict(), "a": float(np.median(off))})
             return
         self.stiffness.ref = fit_stiffness_reference(w[:, 0], w[:, 1], w[:, 2], cfg.stiff_eps_omega)
 
@@ -553,6 +584,8 @@ class OnboardCore:
         """End of the warm-up: this unit's healthy friction mismatch (None without measured Q_red or bidirectional motion)."""
         w = self._fric_warm.take()
         p = self.params
+        if self._given_fric_ref is not None:
+            return
         self.friction.ref = fit_friction_reference(w[:, 0], w[:, 1], p.eps_omega, p.N * p.T_C)
 
     def _self_calibrate(self, t: np.ndarray, res: dict[str, np.ndarray]) -> None:
@@ -696,13 +729,13 @@ class OnboardCore:
                 es[c] = math.nan
         stiff = math.nan
         s_w = False
-        if self.stiffness.ref is not None and t >= cfg.warmup_s:
+        if self.stiffness.ref is not None and t >= self._stiff_t0:
             stiff, s_w, s_e = self.stiffness.step_one(tw_raw, Qt, wm)
             lev_w = lev_w or s_w
             lev_e = lev_e or s_e
         fric = math.nan
         f_w = False
-        if self.friction.ref is not None and t >= cfg.warmup_s:
+        if self.friction.ref is not None and t >= self._fric_t0:
             fric, f_w, f_e = self.friction.step_one(r_Q, wm)
             lev_w = lev_w or f_w
             lev_e = lev_e or f_e

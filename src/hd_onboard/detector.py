@@ -255,41 +255,62 @@ class StiffnessReference:
         return r
 
 
+def _group_ls(X: np.ndarray, y: np.ndarray, group: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """Least squares ``y = a_g + X coef`` with one intercept per ``group`` label (None: one group).
+
+    Solved by de-meaning ``X`` and ``y`` within each group (Frisch-Waugh: the same ``coef`` as the
+    regression with one dummy per group). Returns ``(coef, a)`` with ``a`` the sample-weighted mean
+    of the group intercepts (for one group: the ordinary intercept).
+    """
+    if group is None:
+        Xd, yd = X - X.mean(axis=0), y - y.mean()
+    else:
+        _, code = np.unique(group, return_inverse=True)
+        cnt = np.bincount(code).astype(float)
+        my = np.bincount(code, weights=y) / cnt
+        mX = np.column_stack([np.bincount(code, weights=X[:, j]) / cnt for j in range(X.shape[1])])
+        Xd, yd = X - mX[code], y - my[code]
+    coef, *_ = np.linalg.lstsq(Xd, yd, rcond=None)
+    return coef, float(np.mean(y - X @ coef))
+
+
 def fit_stiffness_reference(twist: np.ndarray, Q: np.ndarray, omega_m: np.ndarray, eps: float,
-                            min_samples: int = 200, source: str = "mission warm-up") -> StiffnessReference | None:
+                            min_samples: int = 200, source: str = "mission warm-up",
+                            group: np.ndarray | None = None) -> StiffnessReference | None:
     """Least-squares healthy torsion law from reference samples (NaN rows ignored).
 
     ``twist = theta_f - theta_m/N`` [rad], ``Q`` [N*m] output torque (measured, else the
     twin's expected one), ``omega_m`` [rad/s], ``eps`` [rad/s] smoothing of the direction term
     ``tanh(omega_m/eps)`` (lost motion / hysteresis offset). Knots at the 40 % and 75 %
-    quantiles of |Q|. Returns None when the data do not define a law: fewer than
-    ``min_samples`` valid rows, no load variation, or a fitted law that is not monotonic
-    (twist must fall or rise with Q on every segment).
+    quantiles of |Q|. ``group`` (optional, one label per sample, e.g. the mission index of
+    pooled archived missions): one offset per group (encoders without a common zero across
+    missions); ``a`` is then their sample-weighted mean. Returns None when the data do not
+    define a law: fewer than ``min_samples`` valid rows, no load variation, or a fitted law that
+    is not monotonic (twist must fall or rise with Q on every segment).
     """
     tw, Q, w = (np.asarray(v, float) for v in (twist, Q, omega_m))
     ok = np.isfinite(tw) & np.isfinite(Q) & np.isfinite(w)
     if ok.sum() < min_samples:
         return None
     tw, Q, w = tw[ok], Q[ok], w[ok]
+    g = None if group is None else np.asarray(group)[ok]
     aq = np.abs(Q)
     q_range = float(np.max(aq))
     q1, q2 = (float(v) for v in np.quantile(aq, [0.4, 0.75]))
     if not (q_range > 0 and 0 < q1 < q2 < q_range and np.std(Q) > 0.05 * q_range):
         return None
     u = np.tanh(w / eps)
-    A = np.column_stack([np.ones(len(Q)), u, stiffness_basis(Q, q1, q2)])
-    coef, *_ = np.linalg.lstsq(A, tw, rcond=None)
-    c = tuple(float(v) for v in coef[2:])
+    coef, a0 = _group_ls(np.column_stack([u, stiffness_basis(Q, q1, q2)]), tw, g)
+    c = tuple(float(v) for v in coef[1:])
     slopes = np.array([c[0] + c[1] + c[2], c[0] + c[2], c[0]])  # |Q| < q1, q1..q2, > q2
     if not (np.all(slopes > 0) or np.all(slopes < 0)):
         # not a torsion law (too little load range): fall back to one linear compliance
-        A = np.column_stack([np.ones(len(Q)), u, Q])
-        coef2, *_ = np.linalg.lstsq(A, tw, rcond=None)
-        if coef2[2] == 0:
+        coef2, a0 = _group_ls(np.column_stack([u, Q]), tw, g)
+        if coef2[1] == 0:
             return None
-        coef = np.array([coef2[0], coef2[1], coef2[2]])
-        c = (float(coef2[2]), 0.0, 0.0)
-    ref = StiffnessReference(float(coef[0]), float(coef[1]), c, q1, q2, float(eps), 1.0, q_range, 0.0, int(len(Q)), source)
+        coef = np.array([coef2[0], coef2[1]])
+        c = (float(coef2[1]), 0.0, 0.0)
+    ref = StiffnessReference(a0, float(coef[0]), c, q1, q2, float(eps), 1.0, q_range, 0.0, int(len(Q)), source)
     g = ref.g(Q)
     gs = float(np.std(g))
     if not gs > 0:
@@ -522,13 +543,36 @@ class FrictionReference:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "friction reference") -> "FrictionReference":
+        """Validated reference from a mapping (twin state / ground update); ValueError naming ``where``."""
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
+        try:
+            r = cls(a=float(d["a"]), b=float(d["b"]), eps=float(d["eps"]), scale=float(d["scale"]),
+                    n=int(d.get("n", 0)), source=str(d.get("source", "update")))
+        except KeyError as e:
+            raise ValueError(f"{where}: missing key {e}") from None
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: values must be numbers, got {d!r}") from None
+        if not all(math.isfinite(v) for v in (r.a, r.b, r.eps, r.scale)):
+            raise ValueError(f"{where}: a, b, eps, scale must be finite, got {d!r}")
+        if not (r.eps > 0 and r.scale > 0):
+            raise ValueError(f"{where}: need eps > 0 and scale > 0, got eps={r.eps}, scale={r.scale}")
+        if abs(r.b) > 1e3 * r.scale:
+            raise ValueError(f"{where}: |b| = {abs(r.b):g} N*m is absurd against scale {r.scale:g} N*m")
+        return r
+
 
 def fit_friction_reference(r_Q: np.ndarray, omega_m: np.ndarray, eps: float, scale: float, min_samples: int = 200,
-                           min_var_u: float = 0.05, source: str = "mission warm-up") -> FrictionReference | None:
+                           min_var_u: float = 0.05, source: str = "mission warm-up",
+                           group: np.ndarray | None = None) -> FrictionReference | None:
     """Least-squares healthy law ``r_Q = a + b tanh(omega_m/eps)`` (NaN rows ignored).
 
-    ``r_Q`` [N*m], ``omega_m`` [rad/s], ``eps`` [rad/s], ``scale`` [N*m] > 0. None when the
-    data do not define it: fewer than ``min_samples`` valid rows or too little motion in
+    ``r_Q`` [N*m], ``omega_m`` [rad/s], ``eps`` [rad/s], ``scale`` [N*m] > 0. ``group``
+    (optional, one label per sample, e.g. the mission of pooled archived missions): one offset
+    ``a`` per group (torque-sensor zero drift between missions), ``a`` then their mean. None when
+    the data do not define it: fewer than ``min_samples`` valid rows or too little motion in
     both directions (variance of u below ``min_var_u``).
     """
     r, w = np.asarray(r_Q, float), np.asarray(omega_m, float)
@@ -538,8 +582,8 @@ def fit_friction_reference(r_Q: np.ndarray, omega_m: np.ndarray, eps: float, sca
     r, u = r[ok], np.tanh(w[ok] / eps)
     if np.var(u) < min_var_u:
         return None
-    coef, *_ = np.linalg.lstsq(np.column_stack([np.ones(len(u)), u]), r, rcond=None)
-    return FrictionReference(float(coef[0]), float(coef[1]), float(eps), float(scale), int(len(u)), source)
+    coef, a0 = _group_ls(u[:, None], r, None if group is None else np.asarray(group)[ok])
+    return FrictionReference(a0, float(coef[0]), float(eps), float(scale), int(len(u)), source)
 
 
 class FrictionMonitor:
