@@ -4,14 +4,18 @@ On start (``run_on_start``) and whenever a message arrives on
 ``/hd/ground/trigger`` (std_msgs/String, any content), it analyses the
 mission archive ``archive_dir`` in a worker thread (the executor keeps
 serving the other nodes): per actuator, the first ``healthy_missions``
-missions (in ``mission_index`` order) are taken as healthy reference; the
-onboard core runs on them in batch (same code as onboard), per-channel
-thresholds come from their residuals (``hd_ground.thresholds``), and the
-friction/inertia parameters are re-estimated by least squares
-(``hd_ground.recalibration``). The result is pushed as one JSON update on
-``/hd/twin/update`` (the twin core validates it, bumps its revision and
-republishes the state the onboard node applies) and a report on
-``/hd/ground/report``.
+missions (in ``mission_index`` order) are taken as healthy reference. The
+friction/inertia parameters are first re-estimated by least squares on all of
+them (``hd_ground.recalibration``); then, per actuator, the onboard core runs
+on its reference missions in batch with those parameters and the twin of
+``model_dir`` (same code as onboard, so the residuals are the ones the onboard
+node will see), and ``hd_ground.references.calibrate_actuator`` gives the
+per-channel residual lines (``thresholds``) and the healthy laws of the
+stiffness and friction monitors (``references``, fitted on all the reference
+samples). The result is pushed as one JSON update on ``/hd/twin/update``
+(``params``, ``thresholds``, ``references``; the twin core validates it, bumps
+its revision and republishes the state the onboard node applies per actuator)
+and a report on ``/hd/ground/report``.
 """
 
 from __future__ import annotations
@@ -29,15 +33,20 @@ PARAMS: dict[str, Any] = {
     "healthy_missions": 3,
     "run_on_start": True,
     "recalibrate": True,
+    "model_dir": "",  # twin the onboard node runs (ONNX dir); "" -> physics stand-in: residuals must match it
 }
 
 
-def analyse_archive(archive_dir: str, healthy_missions: int = 3, do_recal: bool = True, log=print) -> tuple[dict, dict]:
-    """(twin update, report) from a mission archive (pure: no ROS)."""
+def analyse_archive(archive_dir: str, healthy_missions: int = 3, do_recal: bool = True, log=print,
+                    model_dir: str = "", config=None) -> tuple[dict, dict]:
+    """(twin update, report) from a mission archive (pure: no ROS).
+
+    ``model_dir``: the twin the onboard node runs ("" physics stand-in); ``config``: its
+    :class:`hd_onboard.core.OnboardConfig` (default: the core's defaults).
+    """
     from hd_ground.analytics import load_archive, mission_summary
     from hd_ground.recalibration import recalibrate
-    from hd_ground.thresholds import actuator_thresholds
-    from hd_onboard.core import run_mission
+    from hd_ground.references import calibrate_actuator
     from hd_twin import physics as ph
 
     if healthy_missions < 1 or healthy_missions > 10**5:
@@ -46,26 +55,29 @@ def analyse_archive(archive_dir: str, healthy_missions: int = 3, do_recal: bool 
     if not arch:
         raise ValueError(f"{archive_dir}: no readable missions")
     params = ph.TwinParams.from_yaml()
-    update: dict[str, Any] = {"thresholds": {}, "updated_by": "ground"}
+    update: dict[str, Any] = {"thresholds": {}, "references": {}, "updated_by": "ground"}
     report: dict[str, Any] = {"archive_dir": str(archive_dir), "actuators": {}}
-    healthy_all = []
-    for act, missions in arch.items():
-        ref = missions[:healthy_missions]
-        healthy_all += ref
-        res = [run_mission(m) for m in ref]
-        th = actuator_thresholds(res)
-        update["thresholds"][act] = {c: t.to_dict() for c, t in th.items()}
-        report["actuators"][act] = {"missions": [int(m.meta.mission_index) for m in missions],
-                                    "reference": [int(m.meta.mission_index) for m in ref],
-                                    "reference_summary": [mission_summary(r) for r in res],
-                                    "thresholds": update["thresholds"][act]}
-    if do_recal:
+    healthy_all = [m for missions in arch.values() for m in missions[:healthy_missions]]
+    if do_recal:  # first: lines and references are fitted on the residuals of the parameters pushed with them
         try:
             new, rep = recalibrate(healthy_all, params)
             update["params"] = {k: v for k, v in new.to_dict().items() if k not in ("mu_g", "K_out", "notes")}
             report["recalibration"] = rep
+            params = new
         except ValueError as e:
             report["recalibration"] = {"skipped": str(e)}
+    for act, missions in arch.items():
+        ref = missions[:healthy_missions]
+        cal = calibrate_actuator(ref, params, config, model_dir or None, log=log)
+        update["thresholds"][act] = cal["thresholds"]
+        if cal["references"]:
+            update["references"][act] = cal["references"]
+        report["actuators"][act] = {"missions": [int(m.meta.mission_index) for m in missions],
+                                    "reference": [int(m.meta.mission_index) for m in ref],
+                                    "reference_summary": [mission_summary(r) for r in cal["results"]],
+                                    "thresholds": update["thresholds"][act],
+                                    "references": cal["references"],
+                                    "missing_references": sorted({"stiffness", "friction"} - set(cal["references"]))}
     return update, report
 
 
@@ -108,7 +120,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             t0 = time.time()
             try:
                 upd, rep = analyse_archive(self.p["archive_dir"], int(self.p["healthy_missions"]), bool(self.p["recalibrate"]),
-                                           log=lambda s: self.get_logger().warning(s))
+                                           log=lambda s: self.get_logger().warning(s), model_dir=self.p["model_dir"])
                 rep["wall_s"] = time.time() - t0
                 self.result = (upd, rep)
             except Exception as e:  # noqa: BLE001 - report, never crash the stack
@@ -125,7 +137,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.pub_update.publish(ru.json_msg(upd))
             self.pub_report.publish(ru.json_msg(rep))
             self.n_runs += 1
-            self.get_logger().info(f"ground: pushed thresholds for {len(upd['thresholds'])} actuator(s)"
+            self.get_logger().info(f"ground: pushed thresholds for {len(upd['thresholds'])} actuator(s), monitor references "
+                                   f"for {len(upd.get('references', {}))}"
                                    + (" and recalibrated parameters" if "params" in upd else ""))
 
     return GroundNode()

@@ -9,10 +9,12 @@ threshold modes:
 * self-calibrated (default, ``--ground 0``): each mission calibrates its lines
   on its own first ``warmup_s`` (what the node does before the ground has
   analysed the actuator);
-* ground (``--ground K``): per actuator, the lines come from its first K
-  missions (``hd_ground.thresholds.actuator_thresholds``, as the ground node
-  computes them) and only the **other** missions are scored (never the
-  calibration data).
+* ground (``--ground K``): per actuator, the lines and the stiffness / friction
+  monitor references come from its first K missions
+  (``hd_ground.references.calibrate_actuator``, as the ground node computes
+  them) and only the **other** missions are scored (never the calibration
+  data). ``skip=K`` with self-calibration scores the same missions, for a
+  like-for-like comparison.
 
 The bags are taken as healthy: every WARN/ERROR is counted as a false alarm.
 Reported: missions scored, hours scored, missions with WARN or worse, with
@@ -73,14 +75,21 @@ def _margins(res: dict, core: OnboardCore) -> dict[str, float]:
 
 
 def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None = None,
-                      config: OnboardConfig | None = None, labels: Sequence[str] | None = None) -> dict[str, Any]:
-    """Score healthy :class:`hd_bag.mission.Mission` objects (see module docstring); returns the summary dict."""
-    from hd_ground.thresholds import actuator_thresholds
+                      config: OnboardConfig | None = None, labels: Sequence[str] | None = None,
+                      references: bool = True, skip: int = 0) -> dict[str, Any]:
+    """Score healthy :class:`hd_bag.mission.Mission` objects (see module docstring); returns the summary dict.
+
+    ``ground`` K > 0: per actuator, calibrate on its first K missions and score the others; ``references``
+    False gives the ground's lines only (monitor references from each warm-up, the former mode).
+    ``skip`` (self-calibration only): leave each actuator's first ``skip`` missions unscored.
+    """
+    from hd_ground.references import calibrate_actuator
+    from hd_onboard.detector import ChannelThreshold
     from hd_onboard.expected import make_expected
     from hd_twin import physics as ph
 
-    if ground < 0 or ground > 10**5:
-        raise ValueError(f"ground = {ground}: number of calibration missions per actuator must be in 0..1e5")
+    if ground < 0 or ground > 10**5 or skip < 0 or skip > 10**5:
+        raise ValueError(f"ground = {ground}, skip = {skip}: numbers of missions per actuator must be in 0..1e5")
     labels = list(labels) if labels is not None else [f"mission {i}" for i in range(len(missions))]
     cfg = (config or OnboardConfig()).validate()
     by_act: dict[str, list[int]] = {}
@@ -89,24 +98,33 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
     rows = []
     calib = {}
 
-    def core_for(m, thresholds=None):
+    def core_for(m, thresholds=None, refs=None):
         p = ph.TwinParams.from_yaml().with_meta(gear_ratio=m.meta.gear_ratio)
         exp = make_expected(model_dir, p, fs_hz=cfg.nominal_fs or 1000.0)
-        return OnboardCore(exp, p, None, thresholds, cfg)
+        core = OnboardCore(exp, p, None, thresholds, cfg)
+        if refs:
+            core.set_stiffness_reference(refs.get("stiffness"))
+            core.set_friction_reference(refs.get("friction"))
+        return core
 
     for act, idx in by_act.items():
         idx = sorted(idx, key=lambda i: (missions[i].meta.mission_index, labels[i]))
-        th = None
+        th = refs = None
         if ground:
             ref = idx[:ground]
             if len(idx) <= ground:
                 raise ValueError(f"actuator {act}: {len(idx)} mission(s), need more than --ground {ground} to score any")
-            th = actuator_thresholds([run_mission(missions[i], core_for(missions[i])) for i in ref])
-            calib[act] = {"missions": [labels[i] for i in ref], "thresholds": {c: t.to_dict() for c, t in th.items()}}
+            cal = calibrate_actuator([missions[i] for i in ref], config=cfg, model_dir=model_dir)
+            th = {c: ChannelThreshold.from_dict(v, f"ground thresholds of {act}") for c, v in cal["thresholds"].items()}
+            refs = cal["references"] if references else None
+            calib[act] = {"missions": [labels[i] for i in ref], "thresholds": cal["thresholds"],
+                          "references": refs or {}}
             idx = idx[ground:]
+        elif skip:
+            idx = idx[skip:]
         for i in idx:
             m = missions[i]
-            core = core_for(m, th)
+            core = core_for(m, th, refs)
             r = run_mission(m, core)
             ev = r["events"]
             rows.append({
@@ -115,6 +133,8 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
                 "n_warn": sum(1 for e in ev if e[1] == WARN), "n_error": sum(1 for e in ev if e[1] == ERROR),
                 "first_flag_s": r["onset_s"], "reasons": sorted({e[2] for e in ev}),
                 "margin": _margins(r, core), "threshold_source": {c: core.thresholds[c].source for c in CHANNELS},
+                "reference_source": {"stiffness": core.stiffness_status()["reference"],
+                                     "friction": core.friction_status()["reference"]},
                 "twin": core.expected.kind,
             })
     hours = sum(r["duration_s"] for r in rows) / 3600.0
@@ -122,8 +142,11 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
     n_w = sum(1 for r in rows if r["max_level"] >= WARN)
     n_e = sum(1 for r in rows if r["max_level"] >= ERROR)
     flags = sum(r["n_warn"] + r["n_error"] for r in rows)
+    mode = ((f"ground lines + monitor references from the first {ground} missions per actuator" if references
+             else f"ground lines from the first {ground} missions per actuator") if ground
+            else "self-calibrated per mission" + (f" (first {skip} missions per actuator not scored)" if skip else ""))
     return {
-        "mode": f"ground thresholds from the first {ground} missions per actuator" if ground else "self-calibrated per mission",
+        "mode": mode,
         "n_missions": n, "hours": hours, "missions_warn_or_worse": n_w, "missions_error": n_e,
         "false_alarm_rate_per_mission": n_w / n if n else math.nan,
         "error_rate_per_mission": n_e / n if n else math.nan,
@@ -133,7 +156,8 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
 
 
 def evaluate_bags(paths: Iterable[str | os.PathLike], ground: int = 0, model_dir: str | None = None,
-                  config: OnboardConfig | None = None, progress: bool = False) -> dict[str, Any]:
+                  config: OnboardConfig | None = None, progress: bool = False, references: bool = True,
+                  skip: int = 0) -> dict[str, Any]:
     """:func:`evaluate_missions` on bags (files or directories); unreadable bags are listed, not fatal."""
     from hd_bag import read_mission
 
@@ -154,7 +178,7 @@ def evaluate_bags(paths: Iterable[str | os.PathLike], ground: int = 0, model_dir
             bad.append(str(e))
     if not ms:
         raise ValueError("no readable bag: " + "; ".join(bad[:5]))
-    s = evaluate_missions(ms, ground, model_dir, config, labels)
+    s = evaluate_missions(ms, ground, model_dir, config, labels, references=references, skip=skip)
     s["unreadable"] = bad
     return s
 
@@ -211,9 +235,12 @@ def cmd_eval(args) -> int:
 # Detection study: delay per fault type and severity, false alarms on healthy bags
 # ---------------------------------------------------------------------------------------------
 #: (fault name, severity) cases of the detection study; names of hd_sim's mid-mission faults
+#: (a third entry: fault onset [s], here 0: present from the mission start, the case a warm-up reference cannot see)
 DEFAULT_CASES = (("lubrication_loss", 2.0), ("lubrication_loss", 3.0),
                  ("flexspline_stiffness_loss", 0.3), ("flexspline_stiffness_loss", 0.5),
-                 ("flexspline_stiffness_loss", 0.7))
+                 ("flexspline_stiffness_loss", 0.7),
+                 ("flexspline_stiffness_loss", 0.5, 0.0), ("flexspline_stiffness_loss", 0.7, 0.0),
+                 ("lubrication_loss", 3.0, 0.0))
 
 
 def first_crossings(res: dict, core: OnboardCore) -> dict[str, float | None]:
@@ -242,23 +269,59 @@ def first_crossings(res: dict, core: OnboardCore) -> dict[str, float | None]:
     return out
 
 
-def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed: int = 7, seed0: int = 40,
-                    duration: float = 16.0, config: OnboardConfig | None = None, progress: bool = False) -> dict[str, Any]:
-    """Detection delay of the onboard core (physics stand-in, self-calibrated) on simulated faults.
+#: offset of the seeds of the healthy missions the ground calibrates on (never a fault mission's seed)
+GROUND_SEED_OFFSET = 1000
 
-    Mission ``k`` of a case: unit ``actuator`` of the ``pop_seed`` population, seed ``seed0 + k``,
-    profile inspection, fault onset ``8 + 0.5 k`` s inside the simulator kernel (50 ms ramp).
-    The simulator is the scoring harness only: the core sees the contract signals. A flag before
-    the onset counts as a false alarm of that mission (delay not scored). Returns per case the
-    rows ``(seed, onset, first flag [s] or None, delay [s] or None, reasons)`` and a summary
-    (detected, missed, early, median / max delay).
-    """
+
+def _sim_mission(actuator: int, pop_seed: int, seed: int, duration: float, mission_index: int, fault=None):
+    """One simulated mission of the study (t0 set); ``fault`` None: healthy."""
     import dataclasses
 
     from hd_sim import EffectSet, sample_population, simulate_mission
 
-    cfg = (config or OnboardConfig()).validate()
     p = sample_population(actuator + 1, seed=pop_seed)[actuator]
+    m, _ = simulate_mission(p, EffectSet.default(), "inspection", seed, duration=duration, mission_index=mission_index,
+                            fault=fault)
+    return dataclasses.replace(m, t0_ns=1_700_000_000_000_000_000)
+
+
+def study_calibration(ground: int, actuator: int = 2, pop_seed: int = 7, seed0: int = 40, duration: float = 16.0,
+                      config: OnboardConfig | None = None) -> dict[str, Any]:
+    """Ground calibration of the study's unit: ``ground`` healthy missions of the same unit (seeds
+    ``seed0 + GROUND_SEED_OFFSET + j``, never a fault mission's), through
+    :func:`hd_ground.references.calibrate_actuator`; returns its ``thresholds`` and ``references``."""
+    from hd_ground.references import calibrate_actuator
+
+    ms = [_sim_mission(actuator, pop_seed, seed0 + GROUND_SEED_OFFSET + j, duration, j) for j in range(ground)]
+    cal = calibrate_actuator(ms, config=config)
+    return {"seeds": [seed0 + GROUND_SEED_OFFSET + j for j in range(ground)], "thresholds": cal["thresholds"],
+            "references": cal["references"]}
+
+
+def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed: int = 7, seed0: int = 40,
+                    duration: float = 16.0, config: OnboardConfig | None = None, progress: bool = False,
+                    ground: int = 0, missions: dict | None = None) -> dict[str, Any]:
+    """Detection delay of the onboard core (physics stand-in) on simulated faults.
+
+    Mission ``k`` of a case: unit ``actuator`` of the ``pop_seed`` population, seed ``seed0 + k``,
+    profile inspection, fault onset ``8 + 0.5 k`` s inside the simulator kernel (50 ms ramp), or the
+    case's third entry [s] (0: present from the first sample). ``ground`` 0: self-calibrated lines and
+    warm-up references; K > 0: lines and monitor references from K healthy missions of the same unit
+    (:func:`study_calibration`; never the fault missions). The simulator is the scoring harness only:
+    the core sees the contract signals. A flag before the onset counts as a false alarm of that mission
+    (delay not scored). ``missions``: a dict reused across calls (simulated fault missions cached by
+    case and seed, so both modes score the same missions). Returns per case the rows ``(seed, onset,
+    first flag [s] or None, delay [s] or None, reasons, first crossing per source)`` and a summary
+    (detected, missed, early, median / max delay).
+    """
+    from hd_onboard.detector import ChannelThreshold
+
+    cfg = (config or OnboardConfig()).validate()
+    cache = missions if missions is not None else {}
+    cal = None
+    if ground:
+        cal = study_calibration(ground, actuator, pop_seed, seed0, duration, cfg)
+        th = {c: ChannelThreshold.from_dict(v, "study ground thresholds") for c, v in cal["thresholds"].items()}
     out = []
     it = [(c, k) for c in cases for k in range(n)]
     if progress:
@@ -266,21 +329,31 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
 
         from tqdm import tqdm
 
-        it = tqdm(it, desc="fault missions", unit="mission", file=sys.stderr)
+        it = tqdm(it, desc="fault missions" + (f" (ground {ground})" if ground else " (self-calibrated)"),
+                  unit="mission", file=sys.stderr)
     rows: dict[tuple, list] = {tuple(c): [] for c in cases}
-    for (name, sev), k in it:
-        t_on, seed = 8.0 + 0.5 * k, seed0 + k
-        m, _ = simulate_mission(p, EffectSet.default(), "inspection", seed, duration=duration, mission_index=k,
-                                fault={"name": name, "severity": float(sev), "t_onset": t_on})
-        m = dataclasses.replace(m, t0_ns=1_700_000_000_000_000_000)
-        r = run_mission(m, OnboardCore(gear_ratio=m.meta.gear_ratio, config=cfg))
+    for c, k in it:
+        name, sev = c[0], c[1]
+        t_on, seed = (float(c[2]) if len(c) > 2 else 8.0 + 0.5 * k), seed0 + k
+        key = (actuator, pop_seed, seed, name, float(sev), t_on, duration)
+        if key not in cache:
+            cache[key] = _sim_mission(actuator, pop_seed, seed, duration, k,
+                                      {"name": name, "severity": float(sev), "t_onset": t_on})
+        m = cache[key]
+        core = OnboardCore(gear_ratio=m.meta.gear_ratio, config=cfg, thresholds=th if cal else None)
+        if cal:
+            core.set_stiffness_reference(cal["references"].get("stiffness"))
+            core.set_friction_reference(cal["references"].get("friction"))
+        r = run_mission(m, core)
         on = r["onset_s"]
         why = r["events"][0][2] if r["events"] else ""
-        rows[(name, sev)].append((seed, t_on, on, None if on is None or on < t_on else on - t_on, why,
-                                  first_crossings(r, r["core"])))
-    for (name, sev), rr in rows.items():
+        rows[tuple(c)].append((seed, t_on, on, None if on is None or on < t_on else on - t_on, why,
+                               first_crossings(r, r["core"])))
+    for c, rr in rows.items():
+        name, sev = c[0], c[1]
         d = [x[3] for x in rr if x[3] is not None]
-        out.append({"fault": name, "severity": sev, "n": len(rr), "detected": len(d),
+        out.append({"fault": name, "severity": sev, "onset": "mid-mission" if len(c) < 3 else f"{c[2]:g} s",
+                    "n": len(rr), "detected": len(d),
                     "early": sum(1 for x in rr if x[2] is not None and x[2] < x[1]),
                     "missed": sum(1 for x in rr if x[2] is None),
                     "delay_median_s": float(np.median(d)) if d else math.nan,
@@ -289,7 +362,8 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
                     "by_source": {s: {"after_onset": sum(1 for x in rr if x[5].get(s) is not None and x[5][s] >= x[1]),
                                       "before_onset": sum(1 for x in rr if x[5].get(s) is not None and x[5][s] < x[1])}
                                   for s in ("Q_red", "twist", "stiffness", "friction")}})
-    return {"actuator": actuator, "pop_seed": pop_seed, "seed0": seed0, "duration_s": duration, "cases": out}
+    return {"actuator": actuator, "pop_seed": pop_seed, "seed0": seed0, "duration_s": duration, "cases": out,
+            "mode": f"ground ({ground} healthy missions of the unit)" if ground else "self-calibrated", "calibration": cal}
 
 
 def plot_study(study: dict, fa: dict | None, path: str | os.PathLike) -> None:
@@ -299,10 +373,13 @@ def plot_study(study: dict, fa: dict | None, path: str | os.PathLike) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    faults = sorted({c["fault"] for c in study["cases"]})
-    fig, axes = plt.subplots(1, len(faults), figsize=(5 * len(faults), 4), squeeze=False)
+    def panel(c):
+        return c["fault"] + ("" if c.get("onset", "mid-mission") == "mid-mission" else f", onset {c['onset']}")
+
+    faults = sorted({panel(c) for c in study["cases"]})
+    fig, axes = plt.subplots(1, len(faults), figsize=(4.2 * len(faults), 4), squeeze=False)
     for ax, f in zip(axes[0], faults):
-        cs = [c for c in study["cases"] if c["fault"] == f]
+        cs = [c for c in study["cases"] if panel(c) == f]
         top = max([x[3] for c in cs for x in c["rows"] if x[3] is not None] + [1.0]) * 1.3
         for c in cs:
             d = [x[3] for x in c["rows"] if x[3] is not None]
@@ -315,7 +392,7 @@ def plot_study(study: dict, fa: dict | None, path: str | os.PathLike) -> None:
         ax.set_ylabel("delay after onset [s]")
         ax.set_title(f, fontsize=9)
         ax.set_ylim(0, top * 1.1)
-    t = "onboard detection delay (self-calibrated, physics stand-in)"
+    t = f"onboard detection delay ({study.get('mode', 'self-calibrated')}, physics stand-in)"
     if fa:
         t += f"; false alarms {fa['missions_warn_or_worse']}/{fa['n_missions']} healthy missions"
     fig.suptitle(t, fontsize=9)
@@ -326,13 +403,15 @@ def plot_study(study: dict, fa: dict | None, path: str | os.PathLike) -> None:
 
 def study_table(study: dict, fa: dict | None = None) -> str:
     """Markdown table of a :func:`detection_study` (and a false-alarm summary)."""
-    lines = ["| fault | severity | detected | missed | flagged before onset | median delay [s] | max delay [s] | "
+    lines = [f"{study.get('mode', 'self-calibrated')}:",
+             "| fault | severity | onset | detected | missed | flagged before onset | median delay [s] | max delay [s] | "
              "by source after onset (before) |",
-             "|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|"]
     for c in study["cases"]:
         bs = c.get("by_source", {})
         src = ", ".join(f"{k} {v['after_onset']} ({v['before_onset']})" for k, v in bs.items())
-        lines.append(f"| {c['fault']} | {c['severity']:g} | {c['detected']}/{c['n']} | {c['missed']} | {c['early']} | "
+        lines.append(f"| {c['fault']} | {c['severity']:g} | {c.get('onset', 'mid-mission')} | {c['detected']}/{c['n']} | "
+                     f"{c['missed']} | {c['early']} | "
                      f"{c['delay_median_s']:.2f} | {c['delay_max_s']:.2f} | {src} |")
     if fa:
         lines.append(f"\nfalse alarms ({fa['mode']}): WARN or worse in {fa['missions_warn_or_worse']}/{fa['n_missions']} "
@@ -351,6 +430,10 @@ def main(argv=None) -> int:
     from hd_onboard.study_args import add_study_args
 
     add_study_args(ap)
+    if not any(a.dest == "ground" for a in ap._actions):
+        ap.add_argument("--ground", type=int, default=0,
+                        help="also run with ground calibration from K healthy missions per unit (false alarms: first K "
+                             "missions of each actuator calibrate, the others are scored in both modes)")
     return run_study(ap.parse_args(argv))
 
 
@@ -365,22 +448,42 @@ def run_study(a) -> int:
             print(f"unknown onboard parameter {k!r}", file=sys.stderr)
             return 2
         kw[k] = float(v)
+    ground = int(getattr(a, "ground", 0) or 0)
     try:
         cfg = OnboardConfig(**kw).validate()
         if not 1 <= a.n <= 1000:
             raise ValueError(f"--n {a.n}: 1..1000 missions per case")
-        fa = evaluate_bags(a.healthy, config=cfg, progress=True) if a.healthy else None
-        st = detection_study(n=a.n, actuator=a.actuator, pop_seed=a.pop_seed, seed0=a.seed0, config=cfg, progress=True)
+        if not 0 <= ground <= 100:
+            raise ValueError(f"--ground {ground}: 0..100 calibration missions")
+        fa = evaluate_bags(a.healthy, config=cfg, progress=True, skip=ground) if a.healthy else None
+        cache: dict = {}
+        st = detection_study(n=a.n, actuator=a.actuator, pop_seed=a.pop_seed, seed0=a.seed0, config=cfg, progress=True,
+                             missions=cache)
+        fa_g = st_g = None
+        if ground:
+            fa_g = evaluate_bags(a.healthy, ground=ground, config=cfg, progress=True) if a.healthy else None
+            st_g = detection_study(n=a.n, actuator=a.actuator, pop_seed=a.pop_seed, seed0=a.seed0, config=cfg,
+                                   progress=True, ground=ground, missions=cache)
     except ValueError as e:
         print(f"onboard study: {e}", file=sys.stderr)
         return 2
     print(study_table(st, fa))
+    if st_g is not None:
+        print()
+        print(study_table(st_g, fa_g))
     if a.out:
         out = Path(a.out)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "detection_study.json").write_text(json.dumps({"study": st, "false_alarms": fa, "config": kw}, indent=1, default=float))
+        doc = {"study": st, "false_alarms": fa, "config": kw}
+        if st_g is not None:
+            doc.update(ground=ground, study_ground=st_g, false_alarms_ground=fa_g)
+        (out / "detection_study.json").write_text(json.dumps(doc, indent=1, default=float))
         plot_study(st, fa, out / "detection_study.png")
-        print(f"wrote {out / 'detection_study.json'} and {out / 'detection_study.png'}")
+        wrote = [out / "detection_study.json", out / "detection_study.png"]
+        if st_g is not None:
+            plot_study(st_g, fa_g, out / "detection_study_ground.png")
+            wrote.append(out / "detection_study_ground.png")
+        print("wrote " + ", ".join(map(str, wrote)))
     return 0
 
 

@@ -7,7 +7,9 @@ blocks (see ``hdphm.rosutil.take_all``).
 Subscribes: ``/hd/joint_states``, ``/hd/command``, ``/hd/temperature``
 (sensor QoS), ``/hd/mission`` (JSON ``hd_mission`` metadata, latched: a new
 mission resets the core; hardware_id = its actuator_id), ``/hd/twin/state``
-(latched JSON: twin parameters, model version, per-actuator thresholds).
+(latched JSON: twin parameters, model version, per-actuator thresholds and
+stiffness/friction monitor references: a ground reference for this node's
+actuator wins over the warm-up's, status ``reference`` = "ground").
 Publishes: ``/hd/onboard/residuals`` (Float64MultiArray rows, columns
 ``hd_onboard.core.RESIDUAL_COLUMNS``, one message per processed block),
 ``/hd/onboard/features`` (one row per closed window: residual statistics and
@@ -110,6 +112,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.twin_params = ph.TwinParams.from_yaml()
             self.twin_state: dict = {}
             self.thresholds_all: dict[str, dict[str, ChannelThreshold]] = {}
+            self.references_all: dict[str, dict[str, Any]] = {}  # actuator -> {"stiffness"/"friction": reference}
             self.hardware_id = self.p["actuator_id"] or ""
             self.meta: dict = {}
             self.core = None
@@ -187,6 +190,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                                 log=lambda s: self.get_logger().warning(s))
             self.core = OnboardCore(exp, params, None, self.thresholds_all.get(self.hardware_id), self.cfg,
                                     feature_fn=_feature_fn(self.meta, N))
+            self._apply_references(self.core)
             self.core.defer_windows = True
             self.last_diag_t = -math.inf
             self.level = OK
@@ -280,18 +284,30 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 for act, chans in (st.get("thresholds") or {}).items():
                     ths[act] = {c: ChannelThreshold.from_dict(v, f"{ru.TOPIC_TWIN_STATE} thresholds[{act}][{c}]")
                                 for c, v in chans.items() if c in CHANNELS}
+                refs = _parse_references(st.get("references") or {}, ru.TOPIC_TWIN_STATE)
             except ValueError as e:
                 self._error(f"twin update refused: {e}")
                 return
             model_changed = (st.get("model_dir") or "") != (self.twin_state.get("model_dir") or "")
-            self.twin_state, self.twin_params, self.thresholds_all = st, params, ths
+            old_refs = self.references_all.get(self.hardware_id)
+            self.twin_state, self.twin_params, self.thresholds_all, self.references_all = st, params, ths, refs
             if model_changed and self.core is not None and self.core.last_ns is None:
                 self._new_core()
             elif self.core is not None:
                 self.core.set_params(params)
                 if self.hardware_id in ths:
                     self.core.set_thresholds(ths[self.hardware_id])
+                if refs.get(self.hardware_id) != old_refs:  # a new reference restarts that monitor's moments
+                    self._apply_references(self.core)
             self.get_logger().info(f"twin state revision {st.get('revision')} applied")
+
+        def _apply_references(self, core):
+            """This actuator's ground references (if any) to ``core``, exactly as its thresholds."""
+            refs = self.references_all.get(self.hardware_id) or {}
+            if "stiffness" in refs:
+                core.set_stiffness_reference(refs["stiffness"])
+            if "friction" in refs:
+                core.set_friction_reference(refs["friction"])
 
         def _error(self, text: str):
             self.errors.append(text)
@@ -517,6 +533,26 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             return super().destroy_node()
 
     return OnboardNode()
+
+
+def _parse_references(refs: Any, where: str) -> dict[str, dict[str, Any]]:
+    """Twin-state ``references`` -> ``{actuator: {"stiffness": StiffnessReference, "friction": FrictionReference}}``
+    (validated; ValueError naming the actuator and monitor). A state without the key gives {}."""
+    from hd_onboard.detector import FrictionReference, StiffnessReference
+
+    if not isinstance(refs, dict):
+        raise ValueError(f"{where}: references must be a mapping actuator -> monitor -> values")
+    out: dict[str, dict[str, Any]] = {}
+    for act, mons in refs.items():
+        if not isinstance(mons, dict):
+            raise ValueError(f"{where}: references[{act}] must be a mapping")
+        o: dict[str, Any] = {}
+        if "stiffness" in mons:
+            o["stiffness"] = StiffnessReference.from_dict(mons["stiffness"], f"{where} references[{act}][stiffness]")
+        if "friction" in mons:
+            o["friction"] = FrictionReference.from_dict(mons["friction"], f"{where} references[{act}][friction]")
+        out[str(act)] = o
+    return out
 
 
 def _normal_priority() -> None:

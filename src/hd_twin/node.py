@@ -7,11 +7,14 @@ transient_local, depth 1, so a node that starts late still gets it)::
      "params": {TwinParams, SI}, "effects": [declared effects],
      "degradation_law": {"name": "archard", ...prior},
      "thresholds": {actuator_id: {channel: {mu, sigma, h_warn, h_error, source}}},
+     "references": {actuator_id: {"stiffness": {StiffnessReference}, "friction": {FrictionReference}}},
      "normalisation": {...}, "updated_by": str, "history": [last 20 update summaries]}
 
 Updates arrive on ``/hd/twin/update`` (same JSON shape, any subset of the
-keys; ``thresholds`` are merged per actuator). Every update is validated
-(``TwinParams.from_dict`` bounds, threshold sanity); a bad one is refused
+keys; ``thresholds`` and ``references`` are merged per actuator; a state or
+update without ``references`` is valid: older payloads load). Every update is
+validated (``TwinParams.from_dict`` bounds, threshold and reference sanity:
+``hd_onboard.detector`` ``from_dict``); a bad one is refused
 with a /diagnostics WARN naming the problem and the state is unchanged.
 """
 
@@ -36,7 +39,7 @@ def initial_state(model_dir: str = "", params_file: str = "") -> dict:
 
     state: dict[str, Any] = {"revision": 0, "model_dir": model_dir, "model_version": "physics-standin",
                              "effects": list(ph.DEFAULT_EFFECTS), "degradation_law": {"name": "archard"},
-                             "thresholds": {}, "normalisation": {}, "updated_by": "init", "history": []}
+                             "thresholds": {}, "references": {}, "normalisation": {}, "updated_by": "init", "history": []}
     params = ph.TwinParams.from_yaml(params_file or None)
     if model_dir:
         from pathlib import Path
@@ -62,7 +65,7 @@ def apply_update(state: dict, upd: dict, source: str = "update") -> dict:
     from hd_onboard.detector import ChannelThreshold
     from hd_twin import physics as ph
 
-    known = {"params", "thresholds", "normalisation", "effects", "degradation_law", "model_dir", "model_version", "updated_by"}
+    known = {"params", "thresholds", "references", "normalisation", "effects", "degradation_law", "model_dir", "model_version", "updated_by"}
     unknown = set(upd) - known
     if unknown:
         raise ValueError(f"{source}: unknown key(s) {sorted(unknown)}; known: {sorted(known)}")
@@ -81,6 +84,10 @@ def apply_update(state: dict, upd: dict, source: str = "update") -> dict:
                 raise ValueError(f"{source}: thresholds[{act}] must be a mapping channel -> values")
             ok = {c: ChannelThreshold.from_dict(v, f"{source} thresholds[{act}][{c}]").to_dict() for c, v in chans.items()}
             new["thresholds"].setdefault(act, {}).update(ok)
+    if "references" in upd:
+        new.setdefault("references", {})
+        for act, refs in validate_references(upd["references"], source).items():
+            new["references"].setdefault(act, {}).update(refs)
     if "effects" in upd:
         new["effects"] = ph.check_effects(upd["effects"])
     for k in ("normalisation", "degradation_law"):
@@ -96,6 +103,29 @@ def apply_update(state: dict, upd: dict, source: str = "update") -> dict:
     new["history"] = (state.get("history", []) + [{"revision": new["revision"], "by": new["updated_by"], "keys": sorted(upd),
                                                      "wall_time": time.time()}])[-20:]
     return new
+
+
+def validate_references(refs, source: str = "update") -> dict:
+    """``{actuator: {"stiffness": {...}, "friction": {...}}}`` checked entry by entry (either monitor may be
+    absent); returns the normalised mapping; ValueError naming ``source``, the actuator and the monitor."""
+    from hd_onboard.detector import FrictionReference, StiffnessReference
+
+    if not isinstance(refs, dict):
+        raise ValueError(f"{source}: references must be a mapping actuator -> monitor -> values")
+    out = {}
+    for act, mons in refs.items():
+        if not isinstance(mons, dict):
+            raise ValueError(f"{source}: references[{act}] must be a mapping monitor -> values")
+        bad = set(mons) - {"stiffness", "friction"}
+        if bad:
+            raise ValueError(f"{source}: references[{act}]: unknown monitor(s) {sorted(bad)}; known: friction, stiffness")
+        o = {}
+        if "stiffness" in mons:
+            o["stiffness"] = StiffnessReference.from_dict(mons["stiffness"], f"{source} references[{act}][stiffness]").to_dict()
+        if "friction" in mons:
+            o["friction"] = FrictionReference.from_dict(mons["friction"], f"{source} references[{act}][friction]").to_dict()
+        out[str(act)] = o
+    return out
 
 
 def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
