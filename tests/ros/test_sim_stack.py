@@ -141,6 +141,15 @@ def test_ground_node_recalibrates_and_pushes_thresholds(fleet, tmp_path, domain_
         assert {c: d.threshold.source for c, d in onb.core.detectors.items()} == {
             c: onb.thresholds_all[a0][c].source for c in onb.core.detectors}
         assert onb.core.calibrated and not onb.errors
+        # ... and with the ground's stiffness / friction references (fitted on all the reference samples)
+        assert set(tw.state["references"]) == acts and set(onb.references_all) == acts
+        for a in acts:
+            assert rep["actuators"][a]["references"]["stiffness"]["n"] >= 2000
+        refs = rep["actuators"][a0]["references"]
+        if "stiffness" in refs:
+            assert onb.core.stiffness_status()["reference"] == "ground"
+        if "friction" in refs:
+            assert onb.core.friction_status()["reference"] == "ground"
     finally:
         st.close()
 
