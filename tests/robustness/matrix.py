@@ -44,7 +44,10 @@ def _last_error(err: str) -> str:
 def cell_validate(p: str) -> str:
     rc, out, _ = _run(["validate", p])
     errs = [ln for ln in out.splitlines() if ": error:" in ln]
-    return f"rc {rc}" + (f": {_short(errs[0].split(': error: ', 1)[1], 60)}" if errs else "")
+    if errs:
+        return f"rc {rc}: {_short(errs[0].split(': error: ', 1)[1], 60)}"
+    sus = [ln for ln in out.splitlines() if ": warning:" in ln and "anti-correlated" in ln]  # suspect, a warning
+    return f"rc {rc}" + (f", warning: {_short(sus[0].split(': warning: ', 1)[1], 50)}" if sus else "")
 
 
 def cell_eval(model: str, p: str) -> str:
@@ -57,6 +60,8 @@ def cell_eval(model: str, p: str) -> str:
         note = "; out of range: " + ",".join(m["out_of_range"])
     if any("gear ratio" in s for s in m.get("notes", [])):
         note += "; note: other N"
+    if any("suspect data" in s for s in m.get("notes", [])):
+        note += "; note: suspect data"
     for s in m.get("notes", []):
         if "not available" in s:
             note += "; note: no " + s.split("[", 1)[1].split("]", 1)[0].replace("'", "")

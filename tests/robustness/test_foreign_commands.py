@@ -203,6 +203,13 @@ def test_discover_leaves_out_the_twist_of_encoders_without_common_zero(foreign_b
     assert any("common zero" in s for s in rep["data_notes"])
 
 
+def test_discover_repeats_suspect_data(foreign_bags, tmp_path, capsys):
+    out = tmp_path / "disc"
+    assert main(["discover", str(foreign_bags["speed_rpm"]), "--out", str(out), "--no-plots"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert any("suspect data" in s and "in rpm?" in s for s in rep["data_notes"])
+
+
 def test_onboard_eval_runs_on_foreign_bags(foreign_bags, tmp_path, capsys):
     bags = [str(foreign_bags[n]) for n in ("plain", "rosbags", "no_torque", "no_temp", "dropout")]
     rc = main(["onboard", "eval", *bags, "--out", str(tmp_path / "ob"), "--quiet"])

@@ -75,6 +75,7 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02) -> tuple[dic
     if not (np.isfinite(N) and N > 0 and np.isfinite(kt) and kt > 0):
         raise DiscoveryError(f"{name}: gear_ratio={N} and torque_constant={kt} must be finite and positive")
     seg = np.asarray(m.segment if m.segment is not None else np.zeros(n, int))
+    notes += [f"{name}: suspect data (the reader's cross-checks): {x}" for x in getattr(m.report, "suspect", [])]
     s: dict[str, np.ndarray] = {}
     for k in ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red"):
         v = np.asarray(getattr(m, k), float)
