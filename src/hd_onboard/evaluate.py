@@ -430,10 +430,6 @@ def main(argv=None) -> int:
     from hd_onboard.study_args import add_study_args
 
     add_study_args(ap)
-    if not any(a.dest == "ground" for a in ap._actions):
-        ap.add_argument("--ground", type=int, default=0,
-                        help="also run with ground calibration from K healthy missions per unit (false alarms: first K "
-                             "missions of each actuator calibrate, the others are scored in both modes)")
     return run_study(ap.parse_args(argv))
 
 

@@ -11,3 +11,6 @@ def add_study_args(ap) -> None:
     ap.add_argument("--seed0", type=int, default=40, help="mission seed of the first fault mission")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=V", help="OnboardConfig field")
     ap.add_argument("--out", default="", help="write detection_study.json and detection_study.png here")
+    ap.add_argument("--ground", type=int, default=0,
+                    help="also run with ground calibration from K healthy missions per unit (false alarms: first K "
+                         "missions of each actuator calibrate, the others are scored in both modes)")
