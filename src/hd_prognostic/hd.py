@@ -153,6 +153,7 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
             errors.append(f"{b}: {e}")
             continue
         f["path"] = str(b)
+        f["gear_ratio"] = float(m.meta.gear_ratio)  # the observation model holds for one transmission type
         rows.append(f)
         if include_truth:
             hh = m.sim.get(TOPIC_HEALTH, {})
@@ -199,7 +200,7 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
 
 def _feature_dict(a: ActuatorData) -> dict[str, np.ndarray]:
     names = set().union(*(f.keys() for f in a.features)) if a.features else set()
-    return {k: a.feature(k) for k in names if k not in ("notes", "path", "actuator_id", "torque_source")}
+    return {k: a.feature(k) for k in names if k not in ("notes", "path", "actuator_id", "torque_source", "gear_ratio")}
 
 
 def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree: int = 2,
@@ -274,6 +275,9 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
         "predictive_prior": bool(predictive_prior),
     }
     obs.degradation["sigma_log_kappa"] = (obs.degradation["sigma_log_kappa_fit"] if kappa_lifetime else 0.02)
+    Ns = sorted({float(v) for a in train for v in a.feature("gear_ratio") if np.isfinite(v)})
+    if Ns:
+        obs.fit_info["gear_ratio"] = Ns  # transmission types the fit has seen (prognose notes others)
     return obs
 
 
@@ -385,6 +389,12 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
                          f"population the observation model was fitted on ({np.median(w_own):.4g} J vs {w_pop:.4g} J):"
                          " the RUL counts population-sized missions until 3 missions are seen, then this "
                          "actuator's own, so expect a step in the RUL there")
+    Ns_fit = obs.fit_info.get("gear_ratio")
+    Ns_own = sorted({float(v) for v in a.feature("gear_ratio") if np.isfinite(v)})
+    if Ns_fit and Ns_own and any(min(abs(n - f) for f in Ns_fit) > 1e-6 * n for n in Ns_own):
+        notes.append(f"gear ratio N = {Ns_own} differs from the N = {Ns_fit} the observation model was fitted on: "
+                     "the feature-to-wear map and the wear prior belong to another transmission; refit it on this "
+                     "type ('hdphm prognostic fit-obs') before trusting the RUL")
     y_ok = np.isfinite(y)
     if (~y_ok).any():
         notes.append(f"{int((~y_ok).sum())} of {len(y)} steps have no health observation (missing mission index, "

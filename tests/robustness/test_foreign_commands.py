@@ -162,6 +162,18 @@ def test_prognose_when_mission_counters_disagree(tmp_path, capsys):
     assert any("duplicate mission_index" in s for s in h["meta"]["skipped_bags"])
 
 
+def test_prognose_notes_another_transmission_type(tmp_path, capsys):
+    """The packaged observation model was fitted on N = 101 drives; an N = 50 actuator gets a note."""
+    v = FB.replace(FB.VARIANTS["n50"], sim={"gear_ratio": 50, "k_t": 0.35, "duration": 1.5})
+    for k in range(3):
+        FB.write_variant(tmp_path / "n50", FB.replace(v, name=f"m{k}"), seed=k, mission_index=k,
+                         actuator_id="FX-N50")
+    assert main(["prognose", str(tmp_path / "n50"), "--out", str(tmp_path / "p"), "--no-plots",
+                 "--particles", "300"]) == 0
+    h = json.loads((tmp_path / "p" / "rul_history.json").read_text())
+    assert any("N = [50.0] differs from the N = [101.0]" in s for s in h["meta"]["notes"])
+
+
 def test_prognose_on_an_empty_or_missing_folder(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert main(["prognose", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) != 0
