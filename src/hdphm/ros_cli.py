@@ -99,6 +99,10 @@ class BagSource:
             for blk in self._it:
                 if self.meta is None:
                     self.meta = self.scan.metadata.get("hd_mission")
+                    if self.meta is None:  # other tools write metadata after the chunks: look ahead once
+                        from hd_bag import read_metadata
+
+                        self.meta = read_metadata(self.path).get("hd_mission")
                 chans = self.scan.channels
                 topic_of = {cid: c.topic for cid, c in chans.items()}
                 sel = np.array([topic_of.get(int(c)) in CONTRACT_TOPICS for c in blk.channel], bool)
