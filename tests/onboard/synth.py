@@ -34,7 +34,7 @@ def make_mission(duration=20.0, fs=1000.0, fault_at=None, fault_dT=0.3, seed=0, 
     # (a fault is extra input friction the twin does not know: it shows as a residual)
     tau_healthy = tau_m - (np.where(t >= fault_at, fault_dT * np.tanh(omega_m / p.eps_omega), 0.0) if fault_at is not None else 0.0)
     Q_red = ph.quasi_static_Q_red(p, ph.DEFAULT_EFFECTS, tau_healthy, omega_m, None, theta_m_dd=alpha_m, theta_f_dd=alpha_f)
-    theta_m = N * (theta_f - Q_red / p.K_out)
+    theta_m = N * (theta_f + Q_red / p.K_out)  # wind-up: the motor side leads under positive Q_red (as the plant)
     tau_m = tau_m + noise * rng.standard_normal(n)
     Q_red = Q_red + 0.5 * rng.standard_normal(n)
     meta = MissionMeta(actuator, 0, 0.0, N, p.k_t)
