@@ -217,7 +217,11 @@ class OnboardCore:
         if gear_ratio is not None:
             self.params = self.params.with_meta(gear_ratio=gear_ratio)
         fs = self.cfg.nominal_fs or 1000.0
-        self.expected = expected or PhysicsStandInExpected(self.params, fs_hz=fs, accel_cutoff_hz=self.cfg.accel_cutoff_hz)
+        #: the expected-response model configured for this core (each mission starts on it again);
+        #: :attr:`expected` is the one running now (the physics stand-in after a fallback, see :meth:`input_status`)
+        self.expected_configured = expected or PhysicsStandInExpected(self.params, fs_hz=fs,
+                                                                      accel_cutoff_hz=self.cfg.accel_cutoff_hz)
+        self.expected = self.expected_configured
         self.feature_fn = feature_fn
         self.defer_windows = False  # True: closed windows wait in window_jobs for window_row()
         self.window_jobs: list[WindowJob] = []
@@ -237,8 +241,9 @@ class OnboardCore:
 
     def set_params(self, params: ph.TwinParams) -> None:
         self.params = params.with_meta(gear_ratio=self.params.N)
-        if hasattr(self.expected, "set_params"):
-            self.expected.set_params(self.params)
+        for e in {id(self.expected): self.expected, id(self.expected_configured): self.expected_configured}.values():
+            if hasattr(e, "set_params"):
+                e.set_params(self.params)
 
     def set_stiffness_reference(self, ref: "StiffnessReference | dict | None") -> None:
         """Healthy torsion law given by the ground (None: learn it on each mission's warm-up again).
@@ -327,7 +332,14 @@ class OnboardCore:
         self.health = InputHealth()
         self.temperature = math.nan
         self.theta_ref = math.nan
+        self.expected = self.expected_configured
         self.expected.reset()
+        #: input problems of this mission: key -> (level, message); see :meth:`input_status`
+        self.input_notes: dict[str, tuple[int, str]] = {}
+        self._notes_new: list[tuple[str, int, str]] = []
+        self._twist_check: list[float] = []
+        self._twist_checked = False
+        self._raw_warm = _Buf(7, 8192)  # (t, JS_COLS) of the warm-up: unit / sign cross-checks at its end
         self._settle_until = -math.inf
         self._nan_run = 0
         self._hold = np.full(6, np.nan)
@@ -366,6 +378,114 @@ class OnboardCore:
         self._configure_rates()
         self._x1 = np.full(7, np.nan)
         self._es1 = {c: math.nan for c in CHANNELS}
+        if self.fs is not None:
+            self._rate_known()
+
+    # ---- input guard ---------------------------------------------------------
+    def _note(self, key: str, level: int, message: str) -> None:
+        """Record an input problem of this mission (once per key; the highest level wins)."""
+        old = self.input_notes.get(key)
+        if old is None or level > old[0]:
+            self.input_notes[key] = (int(level), message)
+            self._notes_new.append((key, int(level), message))
+
+    def take_input_notes(self) -> list[tuple[str, int, str]]:
+        """Input problems recorded since the last call: ``(key, level, message)``, oldest first."""
+        out, self._notes_new = self._notes_new, []
+        return out
+
+    def input_status(self) -> tuple[int, str]:
+        """Worst input problem of this mission for ``/diagnostics``: ``(level, message)`` (OK, "ok" when none).
+
+        Keys of :attr:`input_notes`: ``twin_rate`` (ERROR: the configured twin cannot run at the
+        joint-state rate; physics-only stand-in used), ``twist_reference`` (WARN: theta_m and theta_f
+        without a common zero; twist channels relative to the warm-up zero, twin replaced by the
+        stand-in), ``speed_scale`` / ``torque_sign`` (WARN: unit or sign errors seen over the warm-up),
+        ``short`` (WARN: the mission ended before the warm-up did: nothing evaluated).
+        """
+        if not self.input_notes:
+            return OK, "ok"
+        lev = max(v[0] for v in self.input_notes.values())
+        return lev, "; ".join(m for _, m in sorted(self.input_notes.values(), key=lambda v: -v[0]))
+
+    @property
+    def fallback_reason(self) -> str:
+        """Why the configured twin is not the one running ("" when it is)."""
+        return getattr(self.expected, "fallback_reason", "") or ""
+
+    def _use_standin(self, key: str, level: int, reason: str) -> None:
+        """Safe mode: replace a trained twin by the physics-only stand-in for the rest of the mission."""
+        cfg = self.cfg
+        exp = PhysicsStandInExpected(self.params, fs_hz=self.fs or cfg.nominal_fs or 1000.0,
+                                     accel_cutoff_hz=cfg.accel_cutoff_hz)
+        exp.fallback_reason = reason
+        self.expected = exp
+        self._note(key, level, reason)
+
+    def _rate_known(self, t_s: float | None = None) -> None:
+        """The joint-state rate is known (at ``t_s`` s of the mission): the expected-response model is set up
+        for it (``configure(fs_hz=...)``, a no-op when its rate is already that) or refused (see :meth:`input_status`)."""
+        fs = float(self.fs)
+        conf = getattr(self.expected, "configure", None)
+        if conf is None or getattr(self.expected, "fs_in", None) == fs:
+            return
+        try:
+            conf(fs_hz=fs)
+        except ValueError as e:
+            fm = getattr(self.expected, "fs_model", math.nan)
+            self._use_standin("twin_rate", ERROR,
+                              f"twin refused: trained at {fm:.1f} Hz, joint states at {fs:.1f} Hz ({e}); "
+                              "physics-only stand-in used")
+        if t_s is not None:  # a reconfigured model restarts: not evaluated for settle_s
+            self._settle_until = max(self._settle_until, t_s + self.cfg.settle_s)
+
+    def _check_twist_reference(self, V: np.ndarray) -> None:
+        """First 16 valid samples: |median(theta_f - theta_m / N)| beyond any transmission twist
+        (``hd_bag.mission.MAX_TWIST_OFFSET``) means encoders without a common zero (see :meth:`input_status`)."""
+        from hd_bag.mission import MAX_TWIST_OFFSET
+
+        tw = V[:, 1] - V[:, 0] / self.params.N
+        self._twist_check += tw[np.isfinite(tw)][:16].tolist()
+        if len(self._twist_check) < 16:
+            return
+        self._twist_checked = True
+        med = float(np.median(self._twist_check))
+        if abs(med) <= MAX_TWIST_OFFSET:
+            return
+        msg = (f"theta_f - theta_m / N = {med:.6g} rad (N = {self.params.N:g}), beyond any transmission twist "
+               f"(> {MAX_TWIST_OFFSET:g} rad): encoders without a common zero; twist channel and stiffness monitor "
+               "run relative to the warm-up's twist zero")
+        if getattr(self.expected, "kind", "") == "onnx_twin":
+            self._use_standin("twist_reference", WARN, msg + "; trained twin not fed this twist: physics-only stand-in used")
+        else:
+            self._note("twist_reference", WARN, msg)
+
+    def _check_units(self) -> None:
+        """End of the warm-up: the bag reader's unit / sign cross-checks (``hd_bag.reader``) on the warm-up samples."""
+        w = self._raw_warm.take()
+        if len(w) < 20:
+            return
+        from types import SimpleNamespace
+
+        from hd_bag import reader as rd
+        from hd_bag.mission import ReadReport
+
+        rep = ReadReport()
+        try:
+            rd._consistency(SimpleNamespace(problems=[]), rep, w[:, 0], w[:, 1:], self.params.N)
+        except (TypeError, AttributeError):  # the reader's internals changed: the check is skipped, said once
+            self._note("unit_check", WARN, "unit / sign cross-checks unavailable (hd_bag.reader changed)")
+            return
+        for m in rep.suspect:
+            key = "torque_sign" if "Q_red" in m else "speed_scale"
+            self._note(key, WARN, m + " (over the warm-up; residual lines self-calibrate on it: detection unreliable)")
+
+    def end_mission(self) -> None:
+        """End of the mission (batch / a new /hd/mission): notes what could not be evaluated."""
+        if self._t0_ns is not None and self._twist_zero is None and self.last_ns is not None:
+            dur = (self.last_ns - self._t0_ns) * 1e-9
+            self._note("short", WARN, f"mission of {dur:.3g} s ended inside the {self.cfg.warmup_s:g} s warm-up "
+                       "(twist zero, self-calibration, monitor references): nothing evaluated")
 
     def _configure_rates(self) -> None:
         fs = self.fs or 1000.0
@@ -427,6 +547,9 @@ class OnboardCore:
                 if len(d):
                     self.fs = 1e9 / float(np.median(d))
                     self._configure_rates()
+                    self._rate_known((int(stamps_ns[0]) - self._t0_ns) * 1e-9)
+        if not self._twist_checked:
+            self._check_twist_reference(V)
         fs = self.fs or 1000.0
         t = (stamps_ns - self._t0_ns) * 1e-9  # s since mission start
         # 2. gaps and NaN -> resets and validity (Q_red may be absent: it is no twin input)
@@ -496,9 +619,11 @@ class OnboardCore:
             wm_ = t < cfg.warmup_s
             self._stiff_warm.extend(np.column_stack([twist_raw[wm_], Q_for_twist[wm_], V[wm_, 2]]))
             self._fric_warm.extend(np.column_stack([r_Q[wm_], V[wm_, 2]]))
+            self._raw_warm.extend(np.column_stack([t[wm_], V[wm_]]))
             if t[-1] >= cfg.warmup_s:
                 self._stiffness_reference()
                 self._friction_reference()
+                self._check_units()
             self._twist_warm.extend(twist[t < cfg.warmup_s])
             if t[-1] >= cfg.warmup_s:
                 w = self._twist_warm.take()
@@ -675,7 +800,7 @@ class OnboardCore:
         tm, tf, wm, wf, tau, Q = v
         # the cases the short path does not handle go through the block path
         cfg = self.cfg
-        if (fs is None or last is None or stamp_ns <= last or self._nan_run
+        if (fs is None or last is None or stamp_ns <= last or self._nan_run or not self._twist_checked
                 or not math.isfinite(tm + tf + wm + wf + tau)
                 or (stamp_ns - last) * 1e-9 * fs > 1.5
                 or ((self._twist_zero is None or not self.calibrated)
@@ -707,6 +832,7 @@ class OnboardCore:
             self._twist_warm.append(twist)
             self._stiff_warm.append((tw_raw, Qt, wm))
             self._fric_warm.append((r_Q, wm))
+            self._raw_warm.append((t, tm, tf, wm, wf, tau, Q))
             r_tw = math.nan
         else:
             r_tw = math.nan if t < cfg.warmup_s else twist - self._twist_zero
@@ -873,6 +999,7 @@ def run_mission(mission, core: OnboardCore | None = None, block: int = 1000, **k
         windows += r.windows
         events += r.events
     windows += core.flush()
+    core.end_mission()
     table = np.concatenate(tables) if tables else np.empty((0, len(RESIDUAL_COLUMNS)))
     max_level = int(table[:, 7].max()) if len(table) else OK
     return {
@@ -884,6 +1011,7 @@ def run_mission(mission, core: OnboardCore | None = None, block: int = 1000, **k
         "onset_s": None if core.onset_ns is None else (core.onset_ns - t0) * 1e-9,
         "health": core.health,
         "core": core,
+        "input": core.input_status(),  # (level, message): input problems and fallbacks (OnboardCore.input_status)
     }
 
 

@@ -74,6 +74,26 @@ def _margins(res: dict, core: OnboardCore) -> dict[str, float]:
     return out
 
 
+def scored(res: dict, core: OnboardCore) -> bool:
+    """True when the mission gave at least one evaluated sample on some flag source (a residual channel
+    past its calibration, or a monitor): the only missions whose 'no flag' means anything."""
+    tab = res["table"]
+    return bool(len(tab)) and bool(np.isfinite(tab[:, [4, 6] + ([8] if tab.shape[1] > 8 else [])
+                                                  + ([9] if tab.shape[1] > 9 else [])]).any())
+
+
+def not_scored_reason(m, cfg: OnboardConfig) -> str:
+    """Why a mission gave nothing to score (the warm-up takes the twist zero, the self-calibration and the
+    monitor references; a flag then needs ``persistence_s``)."""
+    need = cfg.warmup_s + max(cfg.settle_s, cfg.persistence_s)
+    if m.duration < cfg.warmup_s + cfg.settle_s:
+        return (f"too short to calibrate and score: {m.duration:.3g} s of joint states, needs > {need:.3g} s "
+                f"(warm-up {cfg.warmup_s:g} s + persistence {cfg.persistence_s:g} s); use longer missions or "
+                "--ground K with calibration missions of the same actuator")
+    return ("no sample evaluated after the warm-up (joint states NaN, dropouts or stamps not increasing "
+            "after it; see the bag's read report)")
+
+
 def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None = None,
                       config: OnboardConfig | None = None, labels: Sequence[str] | None = None,
                       references: bool = True, skip: int = 0) -> dict[str, Any]:
@@ -100,7 +120,7 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
 
     def core_for(m, thresholds=None, refs=None):
         p = ph.TwinParams.from_yaml().with_meta(gear_ratio=m.meta.gear_ratio)
-        exp = make_expected(model_dir, p, fs_hz=cfg.nominal_fs or 1000.0)
+        exp = make_expected(model_dir, p, fs_hz=cfg.nominal_fs or None)
         core = OnboardCore(exp, p, None, thresholds, cfg)
         if refs:
             core.set_stiffness_reference(refs.get("stiffness"))
@@ -127,6 +147,8 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
             core = core_for(m, th, refs)
             r = run_mission(m, core)
             ev = r["events"]
+            in_lev, in_msg = r["input"]
+            sc = scored(r, core)
             rows.append({
                 "bag": labels[i], "actuator": act, "mission_index": int(m.meta.mission_index),
                 "duration_s": float(m.duration), "max_level": int(r["max_level"]),
@@ -136,9 +158,13 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
                 "reference_source": {"stiffness": core.stiffness_status()["reference"],
                                      "friction": core.friction_status()["reference"]},
                 "twin": core.expected.kind,
+                "scored": sc, "input_level": int(in_lev),
+                "input": "; ".join(v[1] for k, v in core.input_notes.items() if k != "short"),  # short: in note
+                "note": "" if sc else not_scored_reason(m, cfg),
             })
-    hours = sum(r["duration_s"] for r in rows) / 3600.0
-    n = len(rows)
+    n_scored = sum(1 for r in rows if r["scored"])
+    hours = sum(r["duration_s"] for r in rows if r["scored"]) / 3600.0  # missions that gave nothing are not hours scored
+    n = n_scored  # rates are per scored mission
     n_w = sum(1 for r in rows if r["max_level"] >= WARN)
     n_e = sum(1 for r in rows if r["max_level"] >= ERROR)
     flags = sum(r["n_warn"] + r["n_error"] for r in rows)
@@ -147,7 +173,7 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
             else "self-calibrated per mission" + (f" (first {skip} missions per actuator not scored)" if skip else ""))
     return {
         "mode": mode,
-        "n_missions": n, "hours": hours, "missions_warn_or_worse": n_w, "missions_error": n_e,
+        "n_missions": len(rows), "n_scored": n_scored, "hours": hours, "missions_warn_or_worse": n_w, "missions_error": n_e,
         "false_alarm_rate_per_mission": n_w / n if n else math.nan,
         "error_rate_per_mission": n_e / n if n else math.nan,
         "flags_per_hour": flags / hours if hours > 0 else math.nan,
@@ -215,19 +241,29 @@ def cmd_eval(args) -> int:
         print(f"hdphm onboard eval: {e}", file=sys.stderr)
         return 2
     for r in s["missions"]:
-        print(f"{r['bag']}: max level {r['max_level']}, flags {r['n_warn'] + r['n_error']}, margin "
-              + ", ".join(f"{c} {v:.2f}" for c, v in r["margin"].items()))
+        if not r["scored"]:
+            print(f"{r['bag']}: not scored: {r['note']}")
+        else:
+            print(f"{r['bag']}: max level {r['max_level']}, flags {r['n_warn'] + r['n_error']}, margin "
+                  + ", ".join(f"{c} {v:.2f}" for c, v in r["margin"].items())
+                  + (f", twin {r['twin']}" if r["twin"] != s["missions"][0]["twin"] else ""))
+        if r["input"]:
+            print(f"{r['bag']}: input: {r['input']}", file=sys.stderr)
     for b in s["unreadable"]:
         print(f"unreadable: {b}", file=sys.stderr)
-    print(f"{s['mode']}: {s['n_missions']} missions, {s['hours']:.3f} h scored; WARN or worse in "
+    print(f"{s['mode']}: {s['n_scored']} of {s['n_missions']} missions, {s['hours']:.3f} h scored; WARN or worse in "
           f"{s['missions_warn_or_worse']} ({100 * s['false_alarm_rate_per_mission']:.1f} %), ERROR in {s['missions_error']} "
-          f"({100 * s['error_rate_per_mission']:.1f} %); {s['flags_per_hour']:.2f} flags/h; twin {s['missions'][0]['twin']}")
+          f"({100 * s['error_rate_per_mission']:.1f} %); {s['flags_per_hour']:.2f} flags/h; twin {s['missions'][0]['twin']}"
+          + (f"; {s['n_missions'] - s['n_scored']} not scored" if s["n_scored"] < s["n_missions"] else ""))
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         (out / "onboard_eval.json").write_text(json.dumps(s, indent=1, default=float))
         plot_summary(s, out / "onboard_eval.png")
         print(f"wrote {out / 'onboard_eval.json'} and {out / 'onboard_eval.png'}")
+    if s["n_scored"] == 0:
+        print(f"hdphm onboard eval: error: no mission could be scored ({s['missions'][0]['note']})", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -110,16 +110,32 @@ class PhysicsStandInExpected:
     """Physics-only stand-in for the twin (see module docstring)."""
 
     kind = "physics_standin"
+    fallback_reason = ""  # why a configured twin is not the one running ("" when none was configured)
 
     def __init__(self, params: ph.TwinParams, effects=ph.DEFAULT_EFFECTS, fs_hz: float = 1000.0,
                  accel_cutoff_hz: float = 50.0):
         self.params = params
         self.effects = list(effects)
         self.version = f"physics-standin({params.source})"
+        self.fs_hz, self.accel_cutoff_hz = float(fs_hz), float(accel_cutoff_hz)
         self.deriv = CausalDerivative(2, min(accel_cutoff_hz, 0.4 * fs_hz), fs_hz)
 
     def reset(self) -> None:
         self.deriv.reset()
+
+    def configure(self, fs_hz: float | None = None, N: float | None = None) -> None:
+        """Input rate [Hz] now known (the derivative filter is redesigned for it: cutoff
+        ``min(accel_cutoff_hz, 0.4 fs)``, then reset; nothing changes when the rate is the same).
+        ``N`` is carried by the params (ignored)."""
+        if fs_hz and fs_hz != self.fs_hz:
+            self.fs_hz = float(fs_hz)
+            self.deriv = CausalDerivative(2, min(self.accel_cutoff_hz, 0.4 * self.fs_hz), self.fs_hz)
+            self.reset()
+
+    @property
+    def fs_in(self) -> float:
+        """Input rate the derivative filter is designed for [Hz]."""
+        return self.fs_hz
 
     def set_params(self, params: ph.TwinParams) -> None:
         self.params = params
@@ -159,11 +175,29 @@ class OnnxTwinExpected:
         self.N, self.fs = N, fs_hz
         self._last = np.nan
 
+    @property
+    def fs_in(self) -> float:
+        """Input rate the twin is set up for [Hz]."""
+        return float(self.twin.fs_in)
+
+    @property
+    def fs_model(self) -> float:
+        """Rate the twin was trained at [Hz] (its LSTM steps at this rate)."""
+        return float(self.twin.fs_model)
+
     def configure(self, fs_hz: float | None = None, N: float | None = None) -> None:
-        """Input rate [Hz] and gear ratio of the actuator now monitored (then reset)."""
-        self.fs = fs_hz or self.fs
-        self.N = N or self.N
-        self.reset()
+        """Input rate [Hz] and gear ratio of the actuator now monitored (then reset).
+
+        ValueError naming the model directory and both rates when the joint states cannot be
+        decimated by an integer factor to the twin's rate (``hd_twin.data.decimation_for``): the
+        caller then falls back to the physics-only stand-in; the twin keeps its previous rate.
+        """
+        fs_new, N_new = fs_hz or self.fs, N or self.N
+        if fs_new == self.fs_in and N_new == self.N:
+            return
+        self.twin.reset(fs_new, N_new)  # raises before any state is changed here
+        self.fs, self.N = fs_new, N_new
+        self._last = np.nan
 
     def reset(self) -> None:
         self.twin.reset(self.fs, self.N)
@@ -192,15 +226,26 @@ class OnnxTwinExpected:
 
 
 def make_expected(model_dir: str | None, params: ph.TwinParams, effects=ph.DEFAULT_EFFECTS,
-                  fs_hz: float = 1000.0, log=None) -> Any:
-    """The ONNX twin when ``model_dir`` is given and loads, else the physics-only stand-in (logged)."""
+                  fs_hz: float | None = 1000.0, log=None) -> Any:
+    """The ONNX twin when ``model_dir`` is given and loads, else the physics-only stand-in (logged).
+
+    ``fs_hz`` [Hz]: the joint-state rate when known (None: not yet; the ONNX twin starts at its own
+    rate, the stand-in at 1 kHz). :class:`hd_onboard.core.OnboardCore` calls ``configure(fs_hz=...)``
+    once it has measured the rate and falls back to the stand-in, with a diagnostic naming both
+    rates, when the twin cannot run at it. The reason of a load failure is kept in the stand-in's
+    ``fallback_reason``.
+    """
+    reason = ""
     if model_dir:
         try:
             return OnnxTwinExpected(model_dir, N=params.N, fs_hz=fs_hz)
         except Exception as e:  # noqa: BLE001 - any load failure falls back, loudly
+            reason = f"twin model {model_dir!r} not usable ({e}); using the physics-only stand-in"
             if log:
-                log(f"twin model {model_dir!r} not usable ({e}); using the physics-only stand-in")
-    return PhysicsStandInExpected(params, effects, fs_hz=fs_hz)
+                log(reason)
+    exp = PhysicsStandInExpected(params, effects, fs_hz=fs_hz or 1000.0)
+    exp.fallback_reason = reason
+    return exp
 
 
 def finite_or(x: float, default: float) -> float:
