@@ -251,6 +251,9 @@ def cmd_eval(args) -> int:
             print(f"{r['bag']}: input: {r['input']}", file=sys.stderr)
     for b in s["unreadable"]:
         print(f"unreadable: {b}", file=sys.stderr)
+    if s["n_scored"] == 0:
+        print(f"hdphm onboard eval: error: no mission could be scored ({s['missions'][0]['note']})", file=sys.stderr)
+        return 1
     print(f"{s['mode']}: {s['n_scored']} of {s['n_missions']} missions, {s['hours']:.3f} h scored; WARN or worse in "
           f"{s['missions_warn_or_worse']} ({100 * s['false_alarm_rate_per_mission']:.1f} %), ERROR in {s['missions_error']} "
           f"({100 * s['error_rate_per_mission']:.1f} %); {s['flags_per_hour']:.2f} flags/h; twin {s['missions'][0]['twin']}"
@@ -261,9 +264,6 @@ def cmd_eval(args) -> int:
         (out / "onboard_eval.json").write_text(json.dumps(s, indent=1, default=float))
         plot_summary(s, out / "onboard_eval.png")
         print(f"wrote {out / 'onboard_eval.json'} and {out / 'onboard_eval.png'}")
-    if s["n_scored"] == 0:
-        print(f"hdphm onboard eval: error: no mission could be scored ({s['missions'][0]['note']})", file=sys.stderr)
-        return 1
     return 0
 
 

@@ -127,6 +127,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.latency_s: list[float] = []  # arrival -> flag decision, per block (bench)
             self.n_published = {ru.TOPIC_RESIDUALS: 0, ru.TOPIC_FEATURES: 0, ru.TOPIC_DIAGNOSTICS: 0}
             self.errors: list[str] = []
+            self.input_problems: list[tuple[str, int, str]] = []  # (key, level, message): OnboardCore input notes
             self.latency_ns: list[int] = []  # latency_probe: per sample, decision wall time - header.stamp
             self._pending_feat: deque = deque()  # futures of window rows, in window order
             self._pool = (ThreadPoolExecutor(1, thread_name_prefix="onboard-features", initializer=_normal_priority)
@@ -186,8 +187,12 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             N = float(self.meta.get("gear_ratio") or self.p["gear_ratio"] or self.twin_params.N)
             params = self.twin_params.with_meta(gear_ratio=N)
             model_dir = self.twin_state.get("model_dir") or self.p["model_dir"]
-            exp = make_expected(model_dir, params, fs_hz=self.cfg.nominal_fs or 1000.0,
+            # rate unknown until the core has measured it (it then configures the twin or falls back, noted)
+            exp = make_expected(model_dir, params, fs_hz=self.cfg.nominal_fs or None,
                                 log=lambda s: self.get_logger().warning(s))
+            if getattr(exp, "fallback_reason", ""):
+                self.input_problems.append(("twin_load", 2, exp.fallback_reason))
+                self._error(exp.fallback_reason)
             self.core = OnboardCore(exp, params, None, self.thresholds_all.get(self.hardware_id), self.cfg,
                                     feature_fn=_feature_fn(self.meta, N))
             self._apply_references(self.core)
@@ -223,6 +228,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
         def _close_mission(self):
             """End of the current mission: its last window and every pending row are published (in order)."""
             if self.core is not None:
+                self.core.end_mission()
+                self._report_input()
                 self._flush_rows()
                 self.core.flush()
                 self._submit_windows(final=True)
@@ -309,6 +316,20 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             if "friction" in refs:
                 core.set_friction_reference(refs["friction"])
 
+        def _report_input(self):
+            """New input problems of the core (twin refused / replaced, encoder zero, units, short mission):
+            logged, kept in :attr:`input_problems`, published once on ``hdphm/onboard/input`` at their level
+            (ERROR ones also in :attr:`errors`) and then carried by ``hdphm/onboard/input/joint_states``."""
+            for key, lev, msg in self.core.take_input_notes():
+                self.input_problems.append((key, lev, msg))
+                text = f"{ru.TOPIC_JOINT_STATES}: {msg}"
+                if lev >= 2:
+                    self._error(text)
+                else:
+                    self.get_logger().warning(text)
+                    self._publish_diag([diag_status("hdphm/onboard/input", lev, text[:200],
+                                                    self.hardware_id or "unknown", {"problem": key})])
+
         def _error(self, text: str):
             self.errors.append(text)
             self.get_logger().error(text)
@@ -381,6 +402,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
         def _after_samples(self, force_rows: bool = False):
             """Publish what the core produced: flags first, then rows, diagnostics, windows."""
             core = self.core
+            self._report_input()
             for s, lev, why in core.take_events():
                 self.flags.append((self.hardware_id, s, lev, why))
                 self.get_logger().warning(f"{self.hardware_id}: {LEVEL_NAMES[lev]} at stamp {s * 1e-9:.3f} s ({why})")
@@ -457,7 +479,11 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                     return diag_status(name, STALE, f"no joint states for {self.p['stale_timeout_s']} s", self.hardware_id, vals)
                 lev = 1 if (h.n_nan or h.n_gaps or h.n_dropped_order or self.n_bad) else 0
                 msg = "ok" if not lev else "conditioning active (NaN / gaps / out-of-order, see values)"
-                return diag_status(name, lev, msg, self.hardware_id, vals)
+                lev_i, msg_i = self.core.input_status()
+                if lev_i:
+                    lev, msg = max(lev, lev_i), msg_i + ("" if msg == "ok" else "; " + msg)
+                vals["input_problems"] = ",".join(self.core.input_notes)
+                return diag_status(name, lev, msg[:400], self.hardware_id, vals)
             if js_last is not None and (last is None or (js_last - last) * 1e-9 > self.p["stale_timeout_s"]):
                 return diag_status(name, STALE, "missing" if last is None else "stale (joint-state time moved on)", self.hardware_id, vals)
             return diag_status(name, 0, "ok", self.hardware_id, vals)
@@ -482,6 +508,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             msg = LEVEL_NAMES[lev] if core.onset_ns is None else f"{LEVEL_NAMES[lev]}; first flag at stamp {core.onset_ns * 1e-9:.3f}"
             sts.insert(0, diag_status("hdphm/onboard/fault", lev, msg, hid,
                                       {"mission_index": self.meta.get("mission_index", ""), "twin": core.expected.kind,
+                                       "twin_fallback": core.fallback_reason,
                                        "twin_version": core.expected.version, "onset_stamp_s": (core.onset_ns or 0) * 1e-9}))
             for name, st in (("stiffness", core.stiffness_status()), ("friction", core.friction_status())):
                 lev_m = int(st["level"])
