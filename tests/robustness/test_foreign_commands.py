@@ -223,10 +223,19 @@ def test_discover_repeats_suspect_data(foreign_bags, tmp_path, capsys):
 
 
 def test_onboard_eval_runs_on_foreign_bags(foreign_bags, tmp_path, capsys):
+    # the fixture's 2 s bags are shorter than the 5 s warm-up: nothing can be scored, and it says so
     bags = [str(foreign_bags[n]) for n in ("plain", "rosbags", "no_torque", "no_temp", "dropout")]
-    rc = main(["onboard", "eval", *bags, "--out", str(tmp_path / "ob"), "--quiet"])
+    rc = main(["onboard", "eval", *bags, "--quiet"])
     cap = capsys.readouterr()
-    assert rc == 0 and "Traceback" not in cap.err
-    assert (tmp_path / "ob" / "onboard_eval.json").is_file()
+    assert rc == 1 and "Traceback" not in cap.err
+    assert "too short" in cap.out + cap.err
+    # long enough foreign bags (other writers, no torque sensor, no temperature) are scored
+    long = [str(FB.write_variant(tmp_path / "long", FB.replace(FB.VARIANTS[n], sim={**FB.VARIANTS[n].sim, "duration": 7.0})))
+            for n in ("plain", "rosbags", "no_torque", "no_temp")]
+    rc = main(["onboard", "eval", *long, "--out", str(tmp_path / "ob"), "--quiet"])
+    cap = capsys.readouterr()
+    assert rc == 0 and "Traceback" not in cap.err, cap.err
+    rep = json.loads((tmp_path / "ob" / "onboard_eval.json").read_text())
+    assert rep["n_scored"] == 4, rep
     rc = main(["onboard", "eval", str(foreign_bags["no_kt"]), "--quiet"])
     assert rc != 0 and "torque_constant" in capsys.readouterr().err
