@@ -75,3 +75,19 @@ def test_baseline_bags_with_realistic_sensors_give_no_effect(case_bags, tmp_path
     assert r["rmse_after"] == r["rmse_before"]
     # the standstill rows were recognised and left out, with a statement saying so
     assert any("standstill" in s for s in rep["statements"])
+
+
+def test_load_dependent_friction_is_found_alone_with_its_coefficient(case_bags, tmp_path):
+    """Default mesh friction: the catalog term with the right c_L and nothing else.
+
+    The selection used to admit an omega|omega| drag term and a Q_red hysteresis term besides it (both
+    lower the block-CV error by 2-3 %, but their coefficients are not identified: leaving one block out
+    moves them by about their own size, jackknife Wald 5.6 and 5.8 against 9). The error is not halved
+    here (0.39 -> 0.27 N*m against a 0.23 N*m residual floor), so the row is not one of the pass rows.
+    """
+    case = bd.CASE_BY_ID["load_dependent_friction"]
+    r = bd.evaluate_case(case, case_bags(case), tmp_path / "out")
+    assert not r["missing"], f"load_dependent_friction not found: {r['found']}"
+    assert not r["extra"], f"spurious effects {r['extra']} besides load_dependent_friction"
+    assert r["checks"] and all(c["ok"] for c in r["checks"]), r["checks"]
+    assert r["rmse_after"] < 0.8 * r["rmse_before"], (r["rmse_before"], r["rmse_after"])

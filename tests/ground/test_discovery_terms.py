@@ -94,3 +94,25 @@ def test_missing_signal_names_term_and_signal():
     t = [make_term("cogging_torque", "tau_m", sin_cos_pair("theta_e", 6), [1, 0])]
     with pytest.raises(KeyError, match="theta_e"):
         evaluate_terms(t, _signals())
+
+
+def test_jackknife_wald_separates_an_identified_term_from_one_that_changes_from_block_to_block():
+    """A regressor with one coefficient in every block is identified; one whose coefficient flips sign
+    from block to block (it soaks up something different in each) is not, though it lowers the fit error."""
+    import numpy as np
+
+    from hd_ground.discovery.core import _BlockGram, _wald_threshold
+
+    rng = np.random.default_rng(3)
+    n, nb = 4000, 10
+    block = np.repeat(np.arange(nb), n // nb)
+    x0 = np.ones(n)
+    x1 = rng.normal(size=n)
+    x2 = rng.normal(size=n)
+    flip = np.where(block % 2 == 0, 1.0, -1.0) * rng.uniform(0.5, 1.5, nb)[block]
+    y = 0.3 * x0 + 1.0 * x1 + 0.4 * flip * x2 + 0.1 * rng.normal(size=n)
+    gram = _BlockGram(np.stack([x0, x1, x2], 1), y, block)
+    thr = _wald_threshold(1, 3.0)
+    assert abs(thr - 9.0) < 1e-6
+    assert gram.jackknife_wald([0, 1, 2], [1]) > 100 * thr
+    assert gram.jackknife_wald([0, 1, 2], [2]) < thr

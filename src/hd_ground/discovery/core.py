@@ -15,8 +15,10 @@ plots and the report). Steps, for one measured target signal:
 4. Candidate groups (``library.py``) are selected by forward group selection
    with leave-one-block-out cross-validation over the fit blocks: a group is
    added only if it lowers the cross-validated error by ``min_gain`` of the
-   current error and does so in most folds; a backward pass drops groups that
-   became redundant. Alternatives of one family compete; one survives.
+   current error, does so in most folds and has identified coefficients (their
+   leave-one-block-out jackknife Wald statistic reaches the 3-sigma chi^2
+   quantile); a backward pass drops groups that became redundant or lost
+   identification. Alternatives of one family compete; one survives.
 5. The selected model is refitted on all fit data and scored on the held-out
    blocks/bags against the baseline.
 """
@@ -41,6 +43,8 @@ DEFAULT_DECLARED = {"tau_m": ["coulomb_friction", "viscous_friction"], "Q_red": 
 class Options:
     min_gain: float = 0.02  # minimum relative drop of the CV error for adding a group
     fold_majority: float = 0.6  # fraction of folds in which the group must help
+    se_rule: float = 0.0  # the CV gain must exceed this many standard errors of its per-fold gains (0: off)
+    wald_sigmas: float = 3.0  # a group's coefficients must be this many jackknife standard errors from zero
     max_effects: int = 6
     peak_ratio: float = 6.0  # order-spectrum line threshold over the median floor
     max_peaks: int = 6
@@ -241,6 +245,30 @@ class _BlockGram:
         lam = 1e-9 * np.trace(G) / len(ix)
         return np.linalg.solve(G + lam * np.eye(len(ix)), self.gt[ix]) / self.scale[ix]
 
+    def jackknife_wald(self, idx: list[int], cols: list[int]) -> float:
+        """Wald statistic of the coefficients of ``cols`` (a subset of ``idx``) against zero.
+
+        The covariance is the leave-one-block-out jackknife's, (n-1)/n sum (b_i - b_mean)(b_i - b_mean)^T,
+        so it holds whatever the residual's colour or the blocks' differences; a group whose coefficients
+        move by as much as their size when one block is left out is not identified by these data.
+        Compared with a chi^2 quantile of len(cols) degrees of freedom. Dimensionless.
+        """
+        ix = np.asarray(idx)
+        pos = np.array([idx.index(c) for c in cols])
+        Gt = self.Gt[np.ix_(ix, ix)]
+        reg = 1e-9 * np.trace(Gt) / len(ix) * np.eye(len(ix))
+        full = np.linalg.solve(Gt + reg, self.gt[ix])[pos]
+        G = Gt[None] - self.G[:, ix][:, :, ix]
+        g = self.gt[ix][None] - self.g[:, ix]
+        B = np.linalg.solve(G + reg[None], g[..., None])[..., 0][:, pos]
+        nb = B.shape[0]
+        if nb < 3:
+            return float("inf")
+        D = B - B.mean(0)
+        C = (nb - 1) / nb * (D.T @ D)
+        C += 1e-12 * np.trace(C) * np.eye(len(pos)) / len(pos) + 1e-300 * np.eye(len(pos))
+        return float(full @ np.linalg.solve(C, full))
+
     def cv_sse(self, idx: list[int]) -> np.ndarray:
         """Held-out SSE per block when each block is predicted from the others."""
         ix = np.asarray(idx)
@@ -286,6 +314,22 @@ def _lstsq(X, y):
     return beta / scale
 
 
+def _paired_t(sse_a: np.ndarray, sse_b: np.ndarray) -> float:
+    """Gain of model b over model a in standard errors: sum of per-fold SSE drops / its standard error.
+
+    The folds' drops d = sse_a - sse_b are treated as independent draws; the standard error of their
+    sum is sqrt(n_folds) std(d). Returns +inf when every fold gains exactly alike, and a value below 1
+    when the cross-validated gain is within one standard error of zero (the one-standard-error rule).
+    """
+    d = np.asarray(sse_a, float) - np.asarray(sse_b, float)
+    if len(d) < 2:
+        return float("inf") if d.sum() > 0 else float("-inf")
+    se = float(np.std(d, ddof=1) * np.sqrt(len(d)))
+    if se <= 0:
+        return float("inf") if d.sum() > 0 else float("-inf") if d.sum() < 0 else 0.0
+    return float(d.sum() / se)
+
+
 def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Candidate, list[int]]], opt: Options):
     """Forward group selection + backward pruning by leave-one-block-out CV. Returns (selected, trace)."""
     cur_idx = list(base_idx)
@@ -315,12 +359,23 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         gi, e = best
         gain = (cur.sum() - e.sum()) / cur.sum()
         folds = float(np.mean(e < cur))
+        t = _paired_t(cur, e)
         cand = groups[gi][0]
-        rec = {"step": "add?", "candidate": f"{cand.name}[{cand.family}]", "gain": float(gain), "folds_better": folds}
-        if gain < opt.min_gain or folds < opt.fold_majority:
+        rec = {"step": "add?", "candidate": f"{cand.name}[{cand.family}]", "gain": float(gain), "folds_better": folds,
+               "t": t}
+        if gain < opt.min_gain or folds < opt.fold_majority or t < opt.se_rule:
             rec["step"] = "stop"
             trace.append(rec)
             break
+        wald = gram.jackknife_wald(cur_idx + groups[gi][1], groups[gi][1])
+        rec["wald"] = wald
+        if wald < _wald_threshold(len(groups[gi][1]), opt.wald_sigmas):
+            # lowers the CV error, but its coefficients are not identified: leaving out one block moves them
+            # by about their own size (a term soaking up what the others miss, differently in every block)
+            rec["step"] = "reject (unidentified)"
+            trace.append(rec)
+            fams_used.add(cand.family)
+            continue
         rec["step"] = "add"
         trace.append(rec)
         selected.append(gi)
@@ -334,14 +389,41 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         for gi in list(selected):
             idx = list(base_idx) + [c for gj in selected if gj != gi for c in groups[gj][1]]
             e = gram.cv_sse(idx)
-            if (e.sum() - cur.sum()) / cur.sum() < opt.min_gain / 2:
+            t = _paired_t(e, cur)  # how many standard errors the group's removal raises the CV error
+            if (e.sum() - cur.sum()) / cur.sum() < opt.min_gain / 2 or t < opt.se_rule:
                 selected.remove(gi)
                 trace.append({"step": "drop", "candidate": f"{groups[gi][0].name}[{groups[gi][0].family}]",
-                              "loss": float((e.sum() - cur.sum()) / cur.sum())})
+                              "loss": float((e.sum() - cur.sum()) / cur.sum()), "t": t})
                 cur = e
                 changed = True
                 break
+        if changed or not selected:
+            continue
+        # identification in the final model: a group may lose it to one added after it (collinear groups
+        # share the same structure); drop the least identified one, then look again
+        idx = list(base_idx) + [c for gj in selected for c in groups[gj][1]]
+        z = [(gram.jackknife_wald(idx, groups[gi][1]) / _wald_threshold(len(groups[gi][1]), opt.wald_sigmas), gi)
+             for gi in selected]
+        zmin, gi = min(z)
+        if zmin < 1.0:
+            selected.remove(gi)
+            rest = list(base_idx) + [c for gj in selected for c in groups[gj][1]]
+            e = gram.cv_sse(rest)
+            trace.append({"step": "drop (unidentified)", "candidate": f"{groups[gi][0].name}[{groups[gi][0].family}]",
+                          "loss": float((e.sum() - cur.sum()) / cur.sum()),
+                          "wald": float(zmin * _wald_threshold(len(groups[gi][1]), opt.wald_sigmas))})
+            cur = e
+            changed = True
     return selected, trace
+
+
+def _wald_threshold(k: int, sigmas: float) -> float:
+    """chi^2 quantile with k degrees of freedom at the two-sided normal tail of ``sigmas`` (3: p = 0.27 %)."""
+    if sigmas <= 0:
+        return 0.0
+    from scipy.stats import chi2, norm
+
+    return float(chi2.isf(2.0 * norm.sf(sigmas), k))
 
 
 # ---------------------------------------------------------------------------

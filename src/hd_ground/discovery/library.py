@@ -237,7 +237,9 @@ def transmission_candidates(ctx: LibraryContext) -> list[Candidate]:
                   lambda c: {"k3": float(c[0])}, requires=("windup",)),
         Candidate("hysteresis", "hysteresis", "windup", None,
                   [{"op": "sgn", "var": "windup_dot", "eps": 0.0}], "T_h sgn(w'), w = theta_m/N - theta_f",
-                  lambda c: {"T_h": float(c[0])}, requires=("windup_dot",)),
+                  lambda c: {"T_h": float(c[0])}, requires=("windup_dot",),
+                  # a hysteresis loop dissipates: the loop integral of Q_red dw = T_h * total |dw| > 0
+                  positive=True),
         Candidate("unknown", "bias", None, None, [{"op": "const"}], "c_0", lambda c: {"c_0": float(c[0])}),
     ]
 
