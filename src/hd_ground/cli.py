@@ -36,6 +36,9 @@ def register(subparsers) -> None:
     p.add_argument("--min-gain", type=float, default=0.02,
                    help="minimum relative drop of the cross-validated error for adding an effect")
     p.add_argument("--max-effects", type=int, default=6)
+    p.add_argument("--wald-sigmas", type=float, default=3.0,
+                   help="an effect's coefficients must lie this many leave-one-block-out standard errors from zero "
+                        "(identified) to be added")
     p.add_argument("--retrain", action="store_true", help="retrain the twin network with the new terms (needs --twin)")
     p.add_argument("--no-plots", action="store_true")
     p.set_defaults(func=_discover)
@@ -47,15 +50,15 @@ def _discover(args: argparse.Namespace) -> int:
     from hd_ground.discovery.pipeline import expand_paths, run_discovery
 
     for name, v, lo, hi in (("--heldout-frac", args.heldout_frac, 0.05, 0.9), ("--calib-frac", args.calib_frac, 0.01, 0.9),
-                            ("--min-gain", args.min_gain, 0.0, 0.9)):
+                            ("--min-gain", args.min_gain, 0.0, 0.9), ("--wald-sigmas", args.wald_sigmas, 0.0, 20.0)):
         if not lo <= v <= hi:
             print(f"hdphm discover: {name}={v} is outside [{lo}, {hi}]", file=sys.stderr)
             return 2
     if args.blocks < 2 or args.max_effects < 0:
         print("hdphm discover: --blocks must be >= 2 and --max-effects >= 0", file=sys.stderr)
         return 2
-    opt = Options(min_gain=args.min_gain, max_effects=args.max_effects, angle_offset=args.angle_offset,
-                  calib_frac=args.calib_frac)
+    opt = Options(min_gain=args.min_gain, max_effects=args.max_effects, wald_sigmas=args.wald_sigmas,
+                  angle_offset=args.angle_offset, calib_frac=args.calib_frac)
     try:
         heldout = args.heldout
         if args.fit_files:
