@@ -96,24 +96,32 @@ def test_missing_topic_nan_dropout_disorder_twin_update_restart(bags, domain_id)
             if k == 5500:  # twin update mid-mission
                 upd.publish(ru.json_msg({"params": {"T_C": 0.1001}, "updated_by": "test"}))
             if k == 6000:  # onboard restarted mid-replay
+                import time
+
                 pub = rep.pubs[ru.TOPIC_JOINT_STATES]
                 st.remove("onboard")
-                _pump_until(st, lambda: pub.get_subscription_count() == 0, 5.0)
                 st.add("onboard", {"stale_timeout_s": 0.5})
-                # a max-speed replay would otherwise finish before DDS discovery matches
-                # the new subscription (seen on a loaded CI machine: 0 messages received)
-                assert _pump_until(st, lambda: pub.get_subscription_count() >= 1, 15.0)
-                # and the reader side has matched the writer too (discovery is two-sided; a reader that has
-                # not matched yet discards what the writer already sends it)
-                assert _pump_until(st, lambda: st.nodes["onboard"].sub_js.get_publisher_count() >= 1, 15.0)
+                new = st.nodes["onboard"]
+                # discovery of the new reader is asynchronous (graph counts can still show the old one on a
+                # loaded machine): offer this sample until the new node has taken it - proof of delivery; the
+                # repeats carry the same stamp and are dropped as duplicates by the node
+                end = time.monotonic() + 30.0
+                while time.monotonic() < end and new.n_taken[ru.TOPIC_JOINT_STATES] == 0:
+                    pub.publish(pay)
+                    _pump_until(st, lambda: new.n_taken[ru.TOPIC_JOINT_STATES] > 0, 0.05)
+                assert new.n_taken[ru.TOPIC_JOINT_STATES] > 0, "restarted onboard node never matched the replay"
             return pay
 
         rep = Replayer(st.aux, "max", pump=st.pump)
         rep.play(bags["healthy"], skip_topics=(ru.TOPIC_TEMPERATURE,), transform=transform)
         st.pump(force=True)
         onb = st.nodes["onboard"]
+        # reliable keep-all: the restarted node gets the rest, however long a loaded executor takes to hand it over
+        got = _pump_until(st, lambda: onb.n_msgs[ru.TOPIC_JOINT_STATES] > 1000, 30.0)
         assert onb.errors == []
-        assert onb.n_msgs[ru.TOPIC_JOINT_STATES] > 1000  # the restarted node got the rest
+        assert got, (f"restarted node took {onb.n_msgs[ru.TOPIC_JOINT_STATES]} joint states; publisher matched "
+                     f"{rep.pubs[ru.TOPIC_JOINT_STATES].get_subscription_count()} readers, reader matched "
+                     f"{onb.sub_js.get_publisher_count()} writers; replay counts {dict(rep.counts)}")
         # waits below only give a loaded machine time to deliver; what must arrive is unchanged
         tw = st.nodes["twin"]
         assert _pump_until(st, lambda: tw.state["revision"] == 1, 10.0)
