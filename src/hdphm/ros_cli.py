@@ -951,6 +951,22 @@ def cmd_replay(args) -> int:
     return 0
 
 
+def _drain(ex, rec, quiet_spins: int = 3, max_s: float = 10.0) -> None:
+    """On stop: file what the middleware already delivered to the recorder's readers (keep spinning
+    until ``quiet_spins`` spins in a row record nothing, at most ``max_s``), so a SIGTERM loses no
+    message that arrived before it."""
+    end = time.monotonic() + max_s
+    quiet, last = 0, -1
+    while quiet < quiet_spins and time.monotonic() < end:
+        try:
+            ex.spin_once(timeout_sec=0.05)
+        except (Exception, KeyboardInterrupt):  # noqa: BLE001 - shut down / second Ctrl-C: close what we have
+            return
+        n = sum(rec.counts.values())
+        quiet = quiet + 1 if n == last else 0
+        last = n
+
+
 def cmd_record(args) -> int:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -980,6 +996,7 @@ def cmd_record(args) -> int:
     except KeyboardInterrupt:
         pass
     finally:
+        _drain(ex, rec)
         rec.close()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
