@@ -119,6 +119,11 @@ class BagSource:
             self.meta = self.scan.metadata.get("hd_mission")
 
 
+#: s a cross-process replay waits for every reader to acknowledge a mission's samples before the next
+#: ``/hd/mission`` (a loaded machine took more than 2 s: samples were filed with the next mission)
+ACK_TIMEOUT_S = 30.0
+
+
 class Replayer:
     """Publishes bags on the contract topics (+ ``/hd/mission``) from an rclpy node.
 
@@ -257,7 +262,10 @@ class Replayer:
                     from rclpy.duration import Duration
 
                     for p in self.pubs.values():  # the previous mission's samples reached every reader
-                        p.wait_for_all_acked(Duration(seconds=2.0))
+                        if not p.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S)):
+                            self.node.get_logger().warning(
+                                f"replay: {p.topic_name} not acknowledged by every reader within {ACK_TIMEOUT_S:g} s; "
+                                "a per-mission recorder may file its last samples with the next mission")
                 meta = dict(src.meta or {})
                 meta.setdefault("bag", str(path))
                 mmsg = ru.json_msg(meta)
@@ -271,7 +279,7 @@ class Replayer:
                 if self.pump is None:  # across processes: the mission is known before its samples
                     from rclpy.duration import Duration
 
-                    self.pub_mission.wait_for_all_acked(Duration(seconds=2.0))
+                    self.pub_mission.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
                 if self.pump:
                     self.pump(force=True)
                     self._catch_up()
