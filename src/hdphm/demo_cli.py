@@ -195,10 +195,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="runs/demo", help="output folder (default runs/demo)")
     p.add_argument("--actuators", type=int, default=5, help="fleet size; the last actuator is held out")
     p.add_argument("--max-missions", type=int, default=400, help="missions per actuator at most (lives end at failure)")
-    p.add_argument("--duration", type=float, default=4.0, help="inspection mission length, s")
-    p.add_argument("--mission-hours", type=float, default=400.0,
+    p.add_argument("--duration", type=float, default=8.0,
+                   help="inspection mission length, s (longer than the onboard node's 5 s warm-up, or it evaluates nothing)")
+    p.add_argument("--mission-hours", type=float, default=200.0,
                    help="operating hours one mission stands for (wear acceleration; larger = shorter lives)")
-    p.add_argument("--twin-bags-per-actuator", type=int, default=24, help="missions per training actuator for the twin")
+    p.add_argument("--twin-bags-per-actuator", type=int, default=12, help="missions per training actuator for the twin")
     p.add_argument("--epochs", type=int, default=None, help="twin epochs (default: the small preset's)")
     p.add_argument("--workers", type=int, default=2, help="simulation worker processes")
     p.add_argument("--seed", type=int, default=0)
