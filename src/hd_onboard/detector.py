@@ -320,7 +320,84 @@ def fit_stiffness_reference(twist: np.ndarray, Q: np.ndarray, omega_m: np.ndarra
     return ref
 
 
-class StiffnessMonitor:
+class _EWMonitor:
+    """What the stiffness and friction monitors share: exponentially weighted regression moments
+    (forgetting time ``tau_s`` [s]), the persistence runs of their WARN/ERROR lines and the level.
+
+    A subclass sets ``ref`` and implements its moment inputs and solution; ``m`` holds the
+    moments carried between blocks.
+    """
+
+    n_moments = 0
+
+    def __init__(self, tau_s: float, persistence: int, fs: float):
+        self.tau_s = float(tau_s)
+        self.persistence = max(1, int(persistence))
+        self.ref = None
+        self.set_rate(fs)
+        self.reset()
+
+    def set_rate(self, fs: float) -> None:
+        self.lam = min(1.0, 1.0 / (self.tau_s * fs))
+
+    def reset(self) -> None:
+        self.m = np.zeros(self.n_moments)
+        self.run_warn = 0
+        self.run_error = 0
+        self.n_eval = 0
+
+    def _ew_moments(self, X: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """Moments after every sample of a block (rows of ``X`` where ``valid``; an invalid sample
+        repeats the last moments) and carry the last ones to the next block."""
+        n = len(valid)
+        M = np.empty((n, self.n_moments))
+        lam = self.lam
+        if valid.any():
+            Mv, _ = lfilter([lam], [1.0, -(1.0 - lam)], X[valid], axis=0, zi=((1.0 - lam) * self.m)[None, :])
+            pos = np.cumsum(valid) - 1
+            M[:] = np.where((pos >= 0)[:, None], Mv[np.clip(pos, 0, None)], self.m[None, :])
+            self.m = Mv[-1].copy()
+        else:
+            M[:] = self.m[None, :]
+        return M
+
+    def _ew_update(self, x: tuple) -> list[float]:
+        """Scalar path: fold one sample's moment inputs ``x`` into ``m`` (same recursion as the block;
+        plain floats: numpy on a 5-9 element vector costs more than the arithmetic)."""
+        lam, k = self.lam, 1.0 - self.lam
+        new = [k * a + lam * b for a, b in zip(self.m.tolist(), x)]
+        self.m[:] = new
+        return new
+
+    def _runs(self, ok: np.ndarray, v: np.ndarray, warn: float, error: float):
+        """Block persistence: (cond_warn, cond_error) per sample for the estimate ``v`` where ``ok``."""
+        rw = run_lengths(ok & (v > warn), self.run_warn)
+        re = run_lengths(ok & (v > error), self.run_error)
+        self.run_warn, self.run_error = int(rw[-1]), int(re[-1])
+        self.n_eval += int(ok.sum())
+        return rw >= self.persistence, re >= self.persistence
+
+    def _runs_one(self, v: float, warn: float, error: float) -> tuple[bool, bool]:
+        """Scalar persistence for one evaluable estimate ``v``."""
+        self.n_eval += 1
+        self.run_warn = self.run_warn + 1 if v > warn else 0
+        self.run_error = self.run_error + 1 if v > error else 0
+        return self.run_warn >= self.persistence, self.run_error >= self.persistence
+
+    def _not_evaluable(self) -> tuple[float, bool, bool]:
+        self.run_warn = self.run_error = 0
+        return math.nan, False, False
+
+    def level(self) -> int:
+        """Level of the current estimate (persistence applied): OK / WARN / ERROR."""
+        if self.run_error >= self.persistence:
+            return ERROR
+        if self.run_warn >= self.persistence:
+            return WARN
+        return OK
+
+
+class StiffnessMonitor(_EWMonitor):
     """Streaming torsional-stiffness estimator and flag (one actuator).
 
     After a reference law :class:`StiffnessReference` is known (learnt on the mission's
@@ -342,25 +419,19 @@ class StiffnessMonitor:
     (:meth:`step_one`) paths give the same numbers.
     """
 
+    n_moments = _SM_NCH
+
     def __init__(self, tau_s: float = 2.0, loss_warn: float = 0.08, loss_error: float = 0.2,
                  persistence: int = 500, min_excitation: float = 0.5, fs: float = 1000.0):
-        self.tau_s, self.loss_warn, self.loss_error = float(tau_s), float(loss_warn), float(loss_error)
+        self.loss_warn, self.loss_error = float(loss_warn), float(loss_error)
         self.min_excitation = float(min_excitation)
-        self.persistence = max(1, int(persistence))
+        super().__init__(tau_s, persistence, fs)
         self.ref: StiffnessReference | None = None
-        self.set_rate(fs)
-        self.reset()
-
-    def set_rate(self, fs: float) -> None:
-        self.lam = min(1.0, 1.0 / (self.tau_s * fs))
 
     def reset(self) -> None:
-        self.m = np.zeros(_SM_NCH)
-        self.run_warn = 0
-        self.run_error = 0
+        super().reset()
         self.loss = math.nan  # last evaluable estimate
         self.s = math.nan
-        self.n_eval = 0
 
     # --- arithmetic shared by the two paths
     def _moments_inputs(self, twist, Q, omega_m):
@@ -396,27 +467,14 @@ class StiffnessMonitor:
             return np.full(n, np.nan), z, z
         X = self._moments_inputs(twist, Q, omega_m)
         valid = np.asarray(valid, bool) & np.isfinite(X).all(axis=1)
-        M = np.empty((n, _SM_NCH))
-        lam = self.lam
-        if valid.any():
-            Xv = X[valid]
-            Mv, _ = lfilter([lam], [1.0, -(1.0 - lam)], Xv, axis=0, zi=((1.0 - lam) * self.m)[None, :])
-            pos = np.cumsum(valid) - 1
-            M[:] = np.where((pos >= 0)[:, None], Mv[np.clip(pos, 0, None)], self.m[None, :])
-            self.m = Mv[-1].copy()
-        else:
-            M[:] = self.m[None, :]
-        s, ok = self._solve(M)
+        s, ok = self._solve(self._ew_moments(X, valid))
         ok &= valid
         loss = np.where(ok, 1.0 - 1.0 / np.where(ok, s, 1.0), np.nan)
-        rw = run_lengths(ok & (loss > self.loss_warn), self.run_warn)
-        re = run_lengths(ok & (loss > self.loss_error), self.run_error)
-        self.run_warn, self.run_error = int(rw[-1]), int(re[-1])
+        cw, ce = self._runs(ok, loss, self.loss_warn, self.loss_error)
         if ok.any():
             k = int(np.flatnonzero(ok)[-1])
             self.loss, self.s = float(loss[k]), float(s[k])
-            self.n_eval += int(ok.sum())
-        return loss, rw >= self.persistence, re >= self.persistence
+        return loss, cw, ce
 
     def step_one(self, twist: float, Q: float, omega_m: float) -> tuple[float, bool, bool]:
         """One sample (NaN allowed) -> (loss or NaN, cond_warn, cond_error); same arithmetic as :meth:`step`."""
@@ -430,20 +488,8 @@ class StiffnessMonitor:
         u = math.tanh(omega_m / r.eps)
         y = (twist - r.a) / r.g_scale
         if not (x == x and y == y and u == u and abs(x) != math.inf and abs(y) != math.inf):
-            self.run_warn = self.run_error = 0
-            return math.nan, False, False
-        lam, k = self.lam, 1.0 - self.lam
-        m = self.m
-        m0 = k * m[0] + lam
-        m1 = k * m[1] + lam * x
-        m2 = k * m[2] + lam * u
-        m3 = k * m[3] + lam * y
-        m4 = k * m[4] + lam * x * x
-        m5 = k * m[5] + lam * u * u
-        m6 = k * m[6] + lam * x * u
-        m7 = k * m[7] + lam * x * y
-        m8 = k * m[8] + lam * u * y
-        m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], m[8] = m0, m1, m2, m3, m4, m5, m6, m7, m8
+            return self._not_evaluable()
+        m0, m1, m2, m3, m4, m5, m6, m7, m8 = self._ew_update((1.0, x, u, y, x * x, u * u, x * u, x * y, u * y))
         mx, mu_, my = m1 / m0, m2 / m0, m3 / m0
         vxx = m4 / m0 - mx * mx
         vuu = m5 / m0 - mu_ * mu_
@@ -459,22 +505,10 @@ class StiffnessMonitor:
             ok = True
         ok = ok and m0 > 0.6 and vxx >= self.min_excitation ** 2 and s > 0
         if not ok:
-            self.run_warn = self.run_error = 0
-            return math.nan, False, False
+            return self._not_evaluable()
         loss = 1.0 - 1.0 / s
         self.loss, self.s = loss, s
-        self.n_eval += 1
-        self.run_warn = self.run_warn + 1 if loss > self.loss_warn else 0
-        self.run_error = self.run_error + 1 if loss > self.loss_error else 0
-        return loss, self.run_warn >= self.persistence, self.run_error >= self.persistence
-
-    def level(self) -> int:
-        """Level of the current estimate (persistence applied): OK / WARN / ERROR."""
-        if self.run_error >= self.persistence:
-            return ERROR
-        if self.run_warn >= self.persistence:
-            return WARN
-        return OK
+        return (loss, *self._runs_one(loss, self.loss_warn, self.loss_error))
 
 
 def calibrate_channel(r: np.ndarray, *, fs: float, ewma_tau_s: float, persistence_s: float, warn_margin: float,
@@ -586,7 +620,7 @@ def fit_friction_reference(r_Q: np.ndarray, omega_m: np.ndarray, eps: float, sca
     return FrictionReference(a0, float(coef[0]), float(eps), float(scale), int(len(u)), source)
 
 
-class FrictionMonitor:
+class FrictionMonitor(_EWMonitor):
     """Streaming friction estimator and flag (lubrication loss, one actuator).
 
     Friction opposes motion, so more friction (lost or degraded lubricant: Coulomb,
@@ -610,24 +644,18 @@ class FrictionMonitor:
     scalar (:meth:`step_one`) paths give the same numbers.
     """
 
+    n_moments = _FM_NCH
+
     def __init__(self, tau_s: float = 2.0, excess_warn: float = 2.5, excess_error: float = 4.0,
                  persistence: int = 250, min_var_u: float = 0.05, fs: float = 1000.0):
-        self.tau_s, self.excess_warn, self.excess_error = float(tau_s), float(excess_warn), float(excess_error)
+        self.excess_warn, self.excess_error = float(excess_warn), float(excess_error)
         self.min_var_u = float(min_var_u)
-        self.persistence = max(1, int(persistence))
+        super().__init__(tau_s, persistence, fs)
         self.ref: FrictionReference | None = None
-        self.set_rate(fs)
-        self.reset()
-
-    def set_rate(self, fs: float) -> None:
-        self.lam = min(1.0, 1.0 / (self.tau_s * fs))
 
     def reset(self) -> None:
-        self.m = np.zeros(_FM_NCH)
-        self.run_warn = 0
-        self.run_error = 0
+        super().reset()
         self.excess = math.nan  # last evaluable estimate
-        self.n_eval = 0
 
     def _solve(self, m):
         """Moments (..., 5) -> (excess, ok), vectorised."""
@@ -651,27 +679,14 @@ class FrictionMonitor:
         u = np.tanh(np.asarray(omega_m, float) / r.eps)
         y = np.asarray(r_Q, float) - r.a
         valid = np.asarray(valid, bool) & np.isfinite(u) & np.isfinite(y)
-        M = np.empty((n, _FM_NCH))
-        lam = self.lam
-        if valid.any():
-            uv, yv = u[valid], y[valid]
-            Xv = np.column_stack([np.ones(len(uv)), uv, yv, uv * uv, uv * yv])
-            Mv, _ = lfilter([lam], [1.0, -(1.0 - lam)], Xv, axis=0, zi=((1.0 - lam) * self.m)[None, :])
-            pos = np.cumsum(valid) - 1
-            M[:] = np.where((pos >= 0)[:, None], Mv[np.clip(pos, 0, None)], self.m[None, :])
-            self.m = Mv[-1].copy()
-        else:
-            M[:] = self.m[None, :]
-        x, ok = self._solve(M)
+        X = np.column_stack([np.ones(n), u, y, u * u, u * y])
+        x, ok = self._solve(self._ew_moments(X, valid))
         ok &= valid
         x = np.where(ok, x, np.nan)
-        rw = run_lengths(ok & (x > self.excess_warn), self.run_warn)
-        re = run_lengths(ok & (x > self.excess_error), self.run_error)
-        self.run_warn, self.run_error = int(rw[-1]), int(re[-1])
+        cw, ce = self._runs(ok, x, self.excess_warn, self.excess_error)
         if ok.any():
             self.excess = float(x[int(np.flatnonzero(ok)[-1])])
-            self.n_eval += int(ok.sum())
-        return x, rw >= self.persistence, re >= self.persistence
+        return x, cw, ce
 
     def step_one(self, r_Q: float, omega_m: float) -> tuple[float, bool, bool]:
         """One sample (NaN allowed) -> (excess or NaN, cond_warn, cond_error); same arithmetic as :meth:`step`."""
@@ -681,33 +696,13 @@ class FrictionMonitor:
         u = math.tanh(omega_m / r.eps)
         y = r_Q - r.a
         if not (u == u and y == y and abs(y) != math.inf):
-            self.run_warn = self.run_error = 0
-            return math.nan, False, False
-        lam, k = self.lam, 1.0 - self.lam
-        m = self.m
-        m0 = k * m[0] + lam
-        m1 = k * m[1] + lam * u
-        m2 = k * m[2] + lam * y
-        m3 = k * m[3] + lam * u * u
-        m4 = k * m[4] + lam * u * y
-        m[0], m[1], m[2], m[3], m[4] = m0, m1, m2, m3, m4
+            return self._not_evaluable()
+        m0, m1, m2, m3, m4 = self._ew_update((1.0, u, y, u * u, u * y))
         mu_, my = m1 / m0, m2 / m0
         vuu = m3 / m0 - mu_ * mu_
         vuy = m4 / m0 - mu_ * my
         if not (m0 > 0.6 and vuu >= self.min_var_u):
-            self.run_warn = self.run_error = 0
-            return math.nan, False, False
+            return self._not_evaluable()
         x = -(vuy / vuu - r.b) / r.scale
         self.excess = x
-        self.n_eval += 1
-        self.run_warn = self.run_warn + 1 if x > self.excess_warn else 0
-        self.run_error = self.run_error + 1 if x > self.excess_error else 0
-        return x, self.run_warn >= self.persistence, self.run_error >= self.persistence
-
-    def level(self) -> int:
-        """Level of the current estimate (persistence applied): OK / WARN / ERROR."""
-        if self.run_error >= self.persistence:
-            return ERROR
-        if self.run_warn >= self.persistence:
-            return WARN
-        return OK
+        return (x, *self._runs_one(x, self.excess_warn, self.excess_error))
