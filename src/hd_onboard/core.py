@@ -206,6 +206,15 @@ class PushResult:
     windows: list[dict[str, Any]] = field(default_factory=list)
 
 
+def _given_reference(ref, cls, what: str):
+    """A monitor reference given by the ground: None, an instance of ``cls``, or its dict (validated)."""
+    if isinstance(ref, dict):
+        ref = cls.from_dict(ref, what)
+    if ref is not None and not isinstance(ref, cls):
+        raise ValueError(f"{what}: expected {cls.__name__} or dict, got {type(ref).__name__}")
+    return ref
+
+
 class OnboardCore:
     """Streaming residual / threshold / flag core for one actuator (see module docstring)."""
 
@@ -256,10 +265,7 @@ class OnboardCore:
         intercept, so per-mission encoder offsets do not bias the compliance ratio. A dict is
         validated (:meth:`StiffnessReference.from_dict`); None takes effect at the next mission.
         """
-        if isinstance(ref, dict):
-            ref = StiffnessReference.from_dict(ref, "onboard stiffness reference")
-        if ref is not None and not isinstance(ref, StiffnessReference):
-            raise ValueError(f"onboard stiffness reference: expected StiffnessReference or dict, got {type(ref).__name__}")
+        ref = _given_reference(ref, StiffnessReference, "onboard stiffness reference")
         self._given_stiff_ref = ref
         if ref is not None:
             self.stiffness.ref = ref
@@ -274,15 +280,16 @@ class OnboardCore:
         of the same twin (parameters and model) as this core's: the ground fits it with the parameters it
         pushes in the same update. A dict is validated (:meth:`FrictionReference.from_dict`).
         """
-        if isinstance(ref, dict):
-            ref = FrictionReference.from_dict(ref, "onboard friction reference")
-        if ref is not None and not isinstance(ref, FrictionReference):
-            raise ValueError(f"onboard friction reference: expected FrictionReference or dict, got {type(ref).__name__}")
+        ref = _given_reference(ref, FrictionReference, "onboard friction reference")
         self._given_fric_ref = ref
         if ref is not None:
             self.friction.ref = ref
             self.friction.reset()
             self._fric_t0 = 0.0
+
+    def _reference_label(self, ref) -> str:
+        """A monitor's reference for the status: its source, "learning" during the warm-up, "none" after it."""
+        return ref.source if ref is not None else ("learning" if self._twist_zero is None else "none")
 
     def stiffness_status(self) -> dict[str, Any]:
         """State of the stiffness monitor for ``/diagnostics`` (``hdphm/onboard/stiffness``).
@@ -297,7 +304,7 @@ class OnboardCore:
         r = sm.ref
         return {"level": sm.level(), "loss": sm.loss, "compliance_ratio": sm.s, "loss_warn": sm.loss_warn,
                 "loss_error": sm.loss_error, "n_eval": sm.n_eval,
-                "reference": (r.source if r is not None else ("learning" if self._twist_zero is None else "none")),
+                "reference": self._reference_label(r),
                 "compliance": r.compliance if r is not None else math.nan,
                 "q_range": r.q_range if r is not None else math.nan}
 
@@ -313,7 +320,7 @@ class OnboardCore:
         r = fm.ref
         return {"level": fm.level(), "excess": fm.excess, "excess_warn": fm.excess_warn,
                 "excess_error": fm.excess_error, "n_eval": fm.n_eval,
-                "reference": (r.source if r is not None else ("learning" if self._twist_zero is None else "none")),
+                "reference": self._reference_label(r),
                 "b": r.b if r is not None else math.nan, "scale": r.scale if r is not None else math.nan}
 
     @property
