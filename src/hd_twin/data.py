@@ -216,13 +216,37 @@ def antialias_sos(fs: float, decimation: int, order: int = 4):
     return sps.butter(order, 0.8 * (fs / decimation / 2.0), fs=fs, output="sos")
 
 
+#: Half-width [samples] and threshold [robust standard deviations] of :func:`bound_outliers`.
+HAMPEL_HALF, HAMPEL_K = 3, 6.0
+
+
+def bound_outliers(x: np.ndarray, half: int = HAMPEL_HALF, k: float = HAMPEL_K) -> np.ndarray:
+    """Hampel bound: a sample farther than ``k`` robust standard deviations from the median of its
+    ``2 half + 1`` neighbours is replaced by that median (isolated spikes: encoder glitches, torque
+    sensor hits); the scale is 1.4826 x the median absolute deviation of the whole signal from its
+    running median, so a smooth signal is never touched. Vectorised (scipy.ndimage)."""
+    from scipy.ndimage import median_filter  # noqa: PLC0415
+
+    x = np.asarray(x, dtype=np.float64)
+    if len(x) < 2 * half + 2 or not np.isfinite(x).all():
+        return x
+    med = median_filter(x, size=2 * half + 1, mode="nearest")
+    dev = np.abs(x - med)
+    s = 1.4826 * float(np.median(dev))
+    if not s > 0:
+        return x
+    bad = dev > k * s
+    return np.where(bad, med, x) if bad.any() else x
+
+
 def derivative(x: np.ndarray, dt: float, cutoff: float | None = None) -> np.ndarray:
-    """Time derivative of one segment: zero-phase low-pass (2nd-order Butterworth) + central differences.
+    """Time derivative of one segment: outliers bounded (:func:`bound_outliers`), zero-phase low-pass
+    (2nd-order Butterworth, designed at the segment's rate) + central differences.
 
     ``x`` [n] finite, ``dt`` [s], ``cutoff`` [Hz] (default 0.25/dt, None-> no
     filter when the segment is too short for filtfilt).
     """
-    x = np.asarray(x, dtype=np.float64)
+    x = bound_outliers(np.asarray(x, dtype=np.float64))
     if len(x) < 3:
         return np.zeros_like(x)
     fs = 1.0 / dt
@@ -252,6 +276,7 @@ class Segment:
     phi: np.ndarray  # [n] rad, theta_f - theta_m/N (float64)
     phi_d: np.ndarray  # [n] rad/s
     temperature: np.ndarray  # [n] degC (NaN-bridged; T_ref where absent)
+    Q_phys: np.ndarray | None = None  # [n] N*m, the identified physics path (hd_twin.physpath), set by training
 
     @property
     def n(self) -> int:

@@ -233,8 +233,18 @@ class PINN(nn.Module):
     """
 
     def __init__(self, net: TwinLSTM, params: ph.TwinParams, effects, q_mean: float, q_std: float,
-                 loss_cfg: LossConfig, extra_terms=(), calibrate=(), calib_reg: float = 1e-2):
+                 loss_cfg: LossConfig, extra_terms=(), calibrate=(), calib_reg: float = 1e-2,
+                 physpath=None, r_mean: float | None = None, r_std: float | None = None, amp: bool = False):
         super().__init__()
+        from .physpath import PhysicsPath  # noqa: PLC0415
+
+        # Q_red = Q_phys + gate * (r_mean + r_std * network output 0): the identified physics path plus
+        # the learned remainder (hd_twin.physpath); without a physics path Q_phys = 0 and r = Q_red.
+        self.physpath = physpath if physpath is not None else PhysicsPath("none")
+        self.r_mean = float(q_mean if r_mean is None else r_mean)
+        self.r_std = float(q_std if r_std is None else r_std)
+        self.register_buffer("gate", torch.tensor(1.0))
+        self.amp = bool(amp)  # mixed precision (float16 autocast) for the network on CUDA
         bad = [n for n in calibrate if n not in ph._BOUNDS or n in ("N", "k_t", "T_ref")]
         if bad:
             raise ValueError(f"cannot calibrate {bad}; choose among {sorted(set(ph._BOUNDS) - {'N', 'k_t', 'T_ref'})}")
@@ -267,16 +277,32 @@ class PINN(nn.Module):
         return dataclasses.replace(self.params, **kw).validate("calibrated twin parameters")
 
     def output_scales(self) -> dict:
-        """SI = mean + scale * network output, per output channel."""
-        return {"Q_red": (self.q_mean, self.q_std), "u_FS": (0.0, self.u_scale), "y_FS": (0.0, self.y_scale)}
+        """SI = mean + scale * network output, per output channel (Q_red: the learned remainder, before
+        the gate; the twin's Q_red adds the physics path)."""
+        return {"Q_red": (self.r_mean, self.r_std), "u_FS": (0.0, self.u_scale), "y_FS": (0.0, self.y_scale)}
 
-    def to_SI(self, out: torch.Tensor) -> dict:
-        return {"Q_red": self.q_mean + self.q_std * out[..., 0], "u": self.u_scale * out[..., 1],
-                "y": self.y_scale * out[..., 2]}
+    def remainder_SI(self, out: torch.Tensor) -> torch.Tensor:
+        """The learned remainder [N*m] before the gate."""
+        return self.r_mean + self.r_std * out[..., 0]
+
+    def to_SI(self, out: torch.Tensor, q_phys: torch.Tensor | None = None) -> dict:
+        q = self.gate * self.remainder_SI(out)
+        if q_phys is not None:
+            q = q_phys + q
+        return {"Q_red": q, "u": self.u_scale * out[..., 1], "y": self.y_scale * out[..., 2]}
+
+    def forward_net(self, x: torch.Tensor, state=None):
+        """The network, under float16 autocast on CUDA when ``amp`` (cuDNN LSTM in half precision),
+        outputs returned in float32 so the physics residuals stay in full precision."""
+        if self.amp and x.is_cuda:
+            with torch.autocast(device_type="cuda", dtype=torch.float16):
+                out, st = self.net(x, state)
+            return out.float(), st
+        return self.net(x, state)
 
     def losses(self, batch: dict, epoch: float = 0.0, physics: bool = True, update_scaler: bool = True) -> dict:
-        out, _ = self.net(batch["x"])
-        pred = self.to_SI(out)
+        out, _ = self.forward_net(batch["x"])
+        pred = self.to_SI(out, batch.get("Q_phys"))
         mask = batch["mask"].clone()
         mask[:, : self.cfg.washout] = False
         n = mask.sum().clamp_min(1)
@@ -301,12 +327,13 @@ class PINN(nn.Module):
             res.update(L_c=L_c, L_c_ref=L_c_ref, r_rms=rms.detach())
         ramp = ramp_factor(epoch, self.cfg.ramp_epochs)
         res["ramp"] = ramp
-        res["lambda_c"] = float(self.lam.value().detach())
+        lam_v = self.lam.value().detach()  # a tensor: no device synchronisation per step
+        res["lambda_c"] = lam_v
         if use_phys:
             res["L_tot"] = self.lam.total(L_d, res["L_c"], ramp)
             if self.calib_names:
                 res["L_tot"] = res["L_tot"] + self.calib_reg * (self.calib**2).sum()
-            res["L_tot_report"] = (L_d + res["lambda_c"] * res["L_c_ref"]).detach()
+            res["L_tot_report"] = (L_d + lam_v * res["L_c_ref"]).detach()
         else:
             res["L_tot"] = self.lam.total(L_d, None)
             res["L_tot_report"] = L_d.detach()

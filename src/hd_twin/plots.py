@@ -89,12 +89,20 @@ def lambda_trajectory(path: Path, hist: dict) -> None:
     plt.close(fig)
 
 
-def plot_training(out: Path, pinn, norm, tr_segs: Sequence, va_segs: Sequence, hist: dict) -> None:
-    from .train import predict_segments
-
+def plot_training(out: Path, pinn, norm, tr_segs: Sequence, va_segs: Sequence, hist: dict, outs=None) -> None:
+    """``outs``: (training, validation) network outputs already computed (hd_twin.train.predict_outputs),
+    reused instead of predicting again."""
     out = Path(out)
-    ptr = predict_segments(pinn, tr_segs[:3], norm)
-    pva = predict_segments(pinn, va_segs, norm)
+    if outs is not None:
+        from .train import q_from_outputs  # noqa: PLC0415
+
+        ptr = q_from_outputs(pinn, tr_segs[:3], outs[0][:3])
+        pva = q_from_outputs(pinn, va_segs, outs[1])
+    else:
+        from .train import predict_segments  # noqa: PLC0415
+
+        ptr = predict_segments(pinn, tr_segs[:3], norm)
+        pva = predict_segments(pinn, va_segs, norm)
     _timeseries(out / "fig4_train_torque.png", tr_segs[:3], ptr, "training set: reducer output torque")
     _timeseries(out / "fig5_val_torque.png", va_segs, pva, "validation set (held-out): reducer output torque")
     yt = np.concatenate([np.where(s.mask, s.Q_red, np.nan) for s in va_segs])

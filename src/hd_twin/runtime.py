@@ -12,6 +12,14 @@ every ``decimation``-th sample produces an output: ``out["index"]`` gives the
 row of X each output belongs to. LSTM state (h, c), filter state and
 decimation phase carry across calls; :meth:`reset` clears them (new mission
 or after a dropout gap).
+
+Models with a physics path (``config.json:physics_path``, :mod:`hd_twin.physpath`) output
+``Q_red = Q_phys + gate * remainder``: the network (ONNX) gives the remainder, and the identified
+torque balance is evaluated on the model-rate samples received since the last reset (at most
+``PHYS_HISTORY_S`` seconds of them). Its derivative filter is centred (Savitzky-Golay); at the newest
+samples of each call it uses the end-of-window polynomial fit, i.e. only past samples, so a streamed
+Q_phys equals the batch one except within half a filter window of each call's last sample (a
+whole segment in one call equals batch exactly).
 """
 
 from __future__ import annotations
@@ -24,6 +32,8 @@ import numpy as np
 from . import data as D
 
 OUTPUT_NAMES = ("Q_red", "x_FS", "y_FS")
+#: Seconds of model-rate samples the streaming physics path keeps (its filter needs far fewer).
+PHYS_HISTORY_S = 2.0
 
 
 class StreamingTwin:
@@ -54,6 +64,11 @@ class StreamingTwin:
         self.fs_model = float(self.config["preprocessing"]["fs_model"])
         sc = self.config["output_scales"]
         self._scales = [tuple(sc[k]) for k in self.config["outputs"]]
+        from .physpath import PhysicsPath  # noqa: PLC0415
+
+        pp = self.config.get("physics_path")
+        self.physpath = PhysicsPath.from_dict(pp)
+        self.gate = float((pp or {}).get("gate", 1.0)) if self.physpath.active else 1.0
         self.reset(fs_in)
 
     @property
@@ -71,6 +86,8 @@ class StreamingTwin:
         self._last = None
         self._prev = None
         self._phase = 0
+        self._hist = np.zeros((0, len(D.RAW_INPUTS)))  # model-rate rows for the physics path
+        self._n_model = 0  # model-rate samples since the reset
         self.h = np.zeros((self.layers, 1, self.hidden), np.float32)
         self.c = np.zeros((self.layers, 1, self.hidden), np.float32)
 
@@ -121,7 +138,27 @@ class StreamingTwin:
         y, self.h, self.c = self.session.run(None, {"x": Z, "h0": self.h, "c0": self.c})
         y = y[0].astype(np.float64)
         si = [m + s * y[:, j] for j, (m, s) in enumerate(self._scales)]
+        if self.physpath.active:
+            si[0] = self._phys(Xd) + self.gate * si[0]
         return {"Q_red": si[0], "x_FS": si[1] + self.params["r_b"] * Xd[:, 0], "y_FS": si[2], "index": idx}
+
+    def _phys(self, Xd: np.ndarray) -> np.ndarray:
+        """The identified physics path on the new model-rate rows, with the history since the reset."""
+        Xd = Xd.copy()
+        Xd[:, 5] = np.where(np.isfinite(Xd[:, 5]), Xd[:, 5], float(self.params["T_ref"]))
+        for j in range(Xd.shape[1]):  # hold the last finite value (the network's inputs are mean-filled)
+            bad = ~np.isfinite(Xd[:, j])
+            if bad.any():
+                last = self._hist[-1, j] if len(self._hist) else 0.0
+                pos = np.maximum.accumulate(np.where(~bad, np.arange(len(Xd)), -1))
+                Xd[:, j] = np.where(pos >= 0, Xd[np.maximum(pos, 0), j], last)
+        H = np.vstack([self._hist, Xd])
+        dt = self.decimation / self.fs_in
+        q = self.physpath.predict_X(H, dt, t0=(self._n_model - len(self._hist)) * dt)[-len(Xd):]
+        keep = max(16, int(PHYS_HISTORY_S / dt))
+        self._hist = H[-keep:]
+        self._n_model += len(Xd)
+        return q
 
     def run_mission(self, mission) -> dict[str, np.ndarray]:
         """Whole-mission inference, one reset per gap-free segment (as the node does after a gap)."""

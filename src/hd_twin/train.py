@@ -32,6 +32,7 @@ import numpy as np
 
 from . import data as D
 from . import physics as ph
+from .physpath import PhysicsPath, choose_gate
 
 MODEL_FORMAT = "hd_twin/1"
 _CR = "\r" if sys.stderr.isatty() else ""  # overwrite progress lines on a terminal only
@@ -91,6 +92,11 @@ class TrainConfig:
     export_onnx: bool = True
     plots: bool = True
     device: str = "auto"  # "auto" (CUDA when available), "cpu", "cuda"
+    amp: bool = True  # float16 autocast of the network on CUDA (cuDNN LSTM); no effect on CPU
+    eval_batch_samples: int = 1 << 20  # padded samples per batched full-sequence prediction
+    # "auto": the torque balance identified by hd_twin.identify when available, else none;
+    # "identified": required; "none": the network predicts the whole Q_red (models before this structure)
+    physics_path: str = "auto"
     features: list[str] = field(default_factory=lambda: list(D.FEATURES))  # network inputs (names of hd_twin.data)
 
     @classmethod
@@ -116,6 +122,8 @@ class TrainConfig:
         D.feature_columns(self.features)
         if not isinstance(self.extra_terms, list) or not all(isinstance(t, dict) for t in self.extra_terms):
             raise ValueError("training config: extra_terms must be a list of term dicts")
+        if self.physics_path not in ("auto", "identified", "none"):
+            raise ValueError(f"training config: physics_path must be auto, identified or none, got {self.physics_path!r}")
         return self
 
 
@@ -182,7 +190,7 @@ def stack_windows(segs: Sequence[D.Segment], norm: D.Normalizer, length: int, st
     idx = D.windows([s.n for s in segs], length, stride)
     if not idx:
         raise ValueError(f"no segment is long enough for windows of {length} samples")
-    chans = ("Q_red", "theta_m_dd", "theta_f_dd", "phi", "phi_d", "temperature")
+    chans = ("Q_red", "theta_m_dd", "theta_f_dd", "phi", "phi_d", "temperature", "Q_phys")
     W = len(idx)
     out = {k: np.zeros((W, length), np.float32) for k in chans + ("omega_m", "tau_m", "theta_m", "theta_f", "omega_f")}
     out["mask"] = np.zeros((W, length), bool)
@@ -196,6 +204,7 @@ def stack_windows(segs: Sequence[D.Segment], norm: D.Normalizer, length: int, st
         src = {
             "Q_red": np.nan_to_num(seg.Q_red[sl]), "theta_m_dd": seg.theta_m_dd[sl], "theta_f_dd": seg.theta_f_dd[sl],
             "phi": seg.phi[sl], "phi_d": seg.phi_d[sl], "temperature": seg.temperature[sl],
+            "Q_phys": np.zeros(n) if seg.Q_phys is None else seg.Q_phys[sl],
             "omega_m": seg.X[sl, 1], "tau_m": seg.X[sl, 2],
             # wrapped to [-pi, pi): float32 keeps sin(k theta_m) exact for the extra terms
             "theta_m": np.angle(np.exp(1j * seg.X[sl, 0])), "theta_f": seg.X[sl, 3], "omega_f": seg.X[sl, 4],
@@ -220,18 +229,61 @@ def _to_torch(batch: dict, sel=None, device=None) -> dict:
 
 
 # ---- evaluation ------------------------------------------------------------------
-def predict_segments(pinn, segs: Sequence[D.Segment], norm: D.Normalizer) -> list[np.ndarray]:
-    """Full-sequence Q_red prediction [N*m] per segment (zero initial state, as streaming)."""
+def _device_of(pinn):
+    return next(pinn.parameters()).device
+
+
+def segment_phys(pinn, segs: Sequence[D.Segment]) -> list[np.ndarray]:
+    """The physics path per segment (cached on the segment; zeros without one)."""
+    out = []
+    for s in segs:
+        if s.Q_phys is None or len(s.Q_phys) != s.n:
+            s.Q_phys = pinn.physpath.predict_segment(s)
+        out.append(s.Q_phys)
+    return out
+
+
+def predict_outputs(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, batch_samples: int = 1 << 20) -> list[np.ndarray]:
+    """Raw network outputs [n, n_out] per segment, full sequences from a zero state (as streaming).
+
+    Vectorised: segments sorted by length and run as padded batches (the LSTM is causal, so padding
+    after a segment's end never changes its outputs) on the model's device, under autocast on CUDA;
+    ``batch_samples`` bounds the padded samples per batch.
+    """
     import torch
 
     pinn.eval()
-    out = []
+    dev = _device_of(pinn)
+    out: list[np.ndarray | None] = [None] * len(segs)
+    order = sorted(range(len(segs)), key=lambda i: segs[i].n, reverse=True)
+    k = 0
     with torch.no_grad():
-        for s in segs:
-            x = torch.from_numpy(norm.norm_features(s.F).astype(np.float32))[None]
-            y, _ = pinn.net(x)
-            out.append((pinn.q_mean + pinn.q_std * y[0, :, 0]).double().numpy())
-    return out
+        while k < len(order):
+            L = segs[order[k]].n
+            nb = max(1, min(len(order) - k, batch_samples // max(L, 1)))
+            idx = order[k:k + nb]
+            x = np.zeros((nb, L, len(norm.f_mean)), np.float32)
+            for j, i in enumerate(idx):
+                z = norm.norm_features(segs[i].F)
+                x[j, :len(z)] = z
+                x[j, len(z):] = z[-1]
+            y, _ = pinn.forward_net(torch.from_numpy(x).to(dev))
+            y = y.float().cpu().numpy()
+            for j, i in enumerate(idx):
+                out[i] = y[j, :segs[i].n].astype(np.float64)
+            k += nb
+    return out  # type: ignore[return-value]
+
+
+def q_from_outputs(pinn, segs: Sequence[D.Segment], outs: Sequence[np.ndarray], gate: float | None = None) -> list[np.ndarray]:
+    """The twin's Q_red [N*m] per segment: physics path + gate x remainder."""
+    g = float(pinn.gate) if gate is None else float(gate)
+    return [qp + g * (pinn.r_mean + pinn.r_std * o[:, 0]) for qp, o in zip(segment_phys(pinn, segs), outs)]
+
+
+def predict_segments(pinn, segs: Sequence[D.Segment], norm: D.Normalizer) -> list[np.ndarray]:
+    """Full-sequence Q_red prediction [N*m] per segment (zero initial state, as streaming)."""
+    return q_from_outputs(pinn, segs, predict_outputs(pinn, segs, norm))
 
 
 def q_metrics(y_true: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
@@ -254,27 +306,33 @@ def q_metrics(y_true: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
     }
 
 
-def residual_rms(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, params: ph.TwinParams | None = None) -> dict[str, float]:
-    """RMS of r1..r4 (SI) of the trained twin on full segments (valid interior samples)."""
+def residual_rms(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, params: ph.TwinParams | None = None,
+                 outs: Sequence[np.ndarray] | None = None) -> dict[str, float]:
+    """RMS of r1..r4 (SI) of the trained twin on full segments (valid interior samples).
+
+    ``outs``: the network outputs of :func:`predict_outputs` (computed when not given)."""
     import torch
 
+    from .model import physics_residuals_torch
+
     pinn.eval()
+    outs = predict_outputs(pinn, segs, norm) if outs is None else outs
+    segment_phys(pinn, segs)
     sq = np.zeros(4)
     cnt = 0
     with torch.no_grad():
-        for s in segs:
+        for s, o in zip(segs, outs):
+            if s.n < 3:
+                continue
             b = stack_windows([s], norm, s.n, s.n)
             tb = _to_torch(b)
-            out, _ = pinn.net(tb["x"])
-            pred = pinn.to_SI(out)
-            from .model import physics_residuals_torch
-
+            pred = pinn.to_SI(torch.from_numpy(o.astype(np.float32))[None], tb["Q_phys"])
             p = params or pinn.calibrated_params()
             if abs(p.N - s.N) > 1e-9:
                 p = p.with_meta(s.N, s.k_t)
             r = physics_residuals_torch(pred, tb, p, pinn.effects, pinn.extra_terms)
             m = tb["mask"][:, 1:-1].numpy()
-            R = np.stack([ri.double().numpy() for ri in r])
+            R = np.stack([ri.double().cpu().numpy() for ri in r])
             sq += (R[:, m] ** 2).sum(axis=1)
             cnt += int(m.sum())
     rms = np.sqrt(sq / max(cnt, 1))
@@ -282,22 +340,63 @@ def residual_rms(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, params: ph
 
 
 def physics_baseline(segs: Sequence[D.Segment], params: ph.TwinParams, effects) -> np.ndarray:
-    """Concatenated quasi-static physics-only Q_red prediction on the segments [N*m]."""
+    """Concatenated quasi-static Q_red of the prior (uncalibrated) three-body physics on the segments [N*m]."""
     return np.concatenate(
         [ph.quasi_static_Q_red(params.with_meta(s.N, s.k_t), effects, s.X[:, 2], s.X[:, 1], s.temperature,
                                s.theta_m_dd, s.theta_f_dd) for s in segs]
     )
 
 
-def evaluate(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, residuals: bool = True) -> dict:
-    preds = predict_segments(pinn, segs, norm)
+def evaluate(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, residuals: bool = True,
+             outs: Sequence[np.ndarray] | None = None, batch_samples: int = 1 << 20) -> dict:
+    """Q_red metrics of the twin, of its physics path alone and of the ungated network; r1..r4 RMS.
+
+    ``physics_only`` is the identified physics path (the prior three-body physics, ``physics_prior``,
+    when the model has none)."""
+    outs = predict_outputs(pinn, segs, norm, batch_samples) if outs is None else outs
     yt = np.concatenate([np.where(s.mask, s.Q_red, np.nan) for s in segs])
-    yp = np.concatenate(preds)
-    met = q_metrics(yt, yp)
+    met = q_metrics(yt, np.concatenate(q_from_outputs(pinn, segs, outs)))
+    met["gate"] = float(pinn.gate)
     if residuals:
-        met.update(residual_rms(pinn, segs, norm))
-    met["physics_only"] = q_metrics(yt, physics_baseline(segs, pinn.params, pinn.effects))
+        met.update(residual_rms(pinn, segs, norm, outs=outs))
+    prior = q_metrics(yt, physics_baseline(segs, pinn.params, pinn.effects))
+    if pinn.physpath.active:
+        met["physics_only"] = q_metrics(yt, np.concatenate(segment_phys(pinn, segs)))
+        met["physics_prior"] = prior
+        met["ungated"] = q_metrics(yt, np.concatenate(q_from_outputs(pinn, segs, outs, gate=1.0)))
+    else:
+        met["physics_only"] = prior
     return met
+
+
+def group_segments(segs: Sequence[D.Segment]) -> list[list[int]]:
+    """Indices of ``segs`` per held-out group: per actuator when there are >= 2, else per mission."""
+    acts = sorted({s.actuator_id for s in segs})
+    key = (lambda s: s.actuator_id) if len(acts) >= 2 else (lambda s: (s.source, s.mission_index))
+    groups: dict = {}
+    for i, s in enumerate(segs):
+        groups.setdefault(key(s), []).append(i)
+    return list(groups.values())
+
+
+def set_gate(pinn, segs: Sequence[D.Segment], outs: Sequence[np.ndarray]) -> dict:
+    """Choose the remainder's gate on held-out segments (:func:`hd_twin.physpath.choose_gate`) and set it."""
+    import torch
+
+    if not pinn.physpath.active:
+        pinn.gate.fill_(1.0)
+        return {"gate": 1.0, "rule": "no physics path: the network predicts Q_red (gate 1)"}
+    qp = segment_phys(pinn, segs)
+    rem = [pinn.r_mean + pinn.r_std * o[:, 0] for o in outs]
+    ys, qs, rs = [], [], []
+    for g in group_segments(segs):
+        ys.append(np.concatenate([np.where(segs[i].mask, segs[i].Q_red, np.nan) for i in g]))
+        qs.append(np.concatenate([qp[i] for i in g]))
+        rs.append(np.concatenate([rem[i] for i in g]))
+    gate, det = choose_gate(ys, qs, rs)
+    with torch.no_grad():
+        pinn.gate.fill_(gate)
+    return {"gate": gate} | det
 
 
 # ---- training -------------------------------------------------------------------
@@ -365,19 +464,32 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     va_segs = [s for i in va_idx for s in segs_by_m[i]]
     if not tr_segs or not va_segs:
         raise ValueError("no usable segment in the training or the validation missions")
+    # the physics path: identified on the training missions only (the validation units choose the gate)
+    t1 = time.perf_counter()
+    path = PhysicsPath.fit(tr_segs, cfg.physics_path)
+    for s_ in tr_segs + va_segs:
+        s_.Q_phys = path.predict_segment(s_)
+    t_ident = time.perf_counter() - t1
     norm = D.Normalizer.fit(tr_segs, cfg.features)
+    rem = np.concatenate([(s_.Q_red - s_.Q_phys)[s_.mask] for s_ in tr_segs])
+    r_mean, r_std = float(np.mean(rem)), float(np.std(rem))
+    r_std = r_std if r_std > 1e-12 * max(1.0, norm.q_std) else norm.q_std
     Wtr = stack_windows(tr_segs, norm, cfg.seq_len, cfg.stride)
     Wva = stack_windows(va_segs, norm, cfg.seq_len, cfg.seq_len)
 
     net = TwinLSTM(len(cfg.features), len(D.OUTPUTS), cfg.hidden, cfg.layers, cfg.dropout, cfg.skip)
     lcfg = LossConfig(lambda_mode=cfg.lambda_mode, lambda_init=cfg.lambda_init, adaptive_scaling=cfg.adaptive_scaling,
                       ramp_epochs=cfg.ramp_epochs, washout=cfg.washout)
-    pinn = PINN(net, params, cfg.declared_effects, norm.q_mean, norm.q_std, lcfg, cfg.extra_terms,
-                cfg.calibrate, cfg.calib_reg)
-    physics_on = not (cfg.lambda_mode == "fixed" and cfg.lambda_init == 0)
     dev = torch.device("cuda" if cfg.device == "auto" and torch.cuda.is_available() else
                        ("cpu" if cfg.device == "auto" else cfg.device))
+    amp = bool(cfg.amp and dev.type == "cuda")
+    pinn = PINN(net, params, cfg.declared_effects, norm.q_mean, norm.q_std, lcfg, cfg.extra_terms,
+                cfg.calibrate, cfg.calib_reg, physpath=path, r_mean=r_mean, r_std=r_std, amp=amp)
+    physics_on = not (cfg.lambda_mode == "fixed" and cfg.lambda_init == 0)
+    if dev.type == "cuda":
+        torch.backends.cudnn.benchmark = True  # cuDNN picks its fastest LSTM kernels for the fixed window shape
     pinn.to(dev)
+    scaler = torch.amp.GradScaler("cuda") if amp else None
     opt = torch.optim.Adam([{"params": net.parameters(), "weight_decay": cfg.weight_decay},
                             {"params": list(pinn.lam.parameters()) + [pinn.calib], "weight_decay": 0.0}], lr=cfg.lr)
     n_tr = len(Wtr["x"])
@@ -389,23 +501,36 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
                                              "val_data", "val_physics", "lambda_c", "ramp", "lr", "time_s")}
     hist["lambda_c_steps"] = []
     Vt = _to_torch(Wva, device=dev)
+    Tt = _to_torch(Wtr, device=dev)  # the training windows live on the device: no host copy per step
+    zero = torch.zeros((), device=dev)
     for ep in range(cfg.epochs):
         pinn.train()
-        perm = rng.permutation(n_tr)
-        acc = np.zeros(3)
+        perm = torch.from_numpy(rng.permutation(n_tr)).to(dev)
+        acc_t, lam_t = [], []
         for b in range(steps_per_epoch):
             sel = perm[b * cfg.batch:(b + 1) * cfg.batch]
-            batch = _to_torch(Wtr, sel, device=dev)
+            batch = {k: v[sel] for k, v in Tt.items()}
             res = pinn.losses(batch, epoch=ep + b / steps_per_epoch, physics=physics_on)
-            opt.zero_grad()
-            res["L_tot"].backward()
+            opt.zero_grad(set_to_none=True)
+            if scaler is not None:
+                scaler.scale(res["L_tot"]).backward()
+                scaler.unscale_(opt)
+            else:
+                res["L_tot"].backward()
             if cfg.grad_clip > 0:
                 torch.nn.utils.clip_grad_norm_(net.parameters(), cfg.grad_clip)
-            opt.step()
+            if scaler is not None:
+                scaler.step(opt)
+                scaler.update()
+            else:
+                opt.step()
             sched.step()
-            acc += [float(res["L_tot_report"]), float(res["L_d"].detach()), float(res.get("L_c_ref", 0.0))]
-            hist["lambda_c_steps"].append(float(pinn.lam.value().detach()))
-        acc /= steps_per_epoch
+            # kept as tensors and read once per epoch (a float() per step would synchronise the device)
+            acc_t.append(torch.stack([res["L_tot_report"].float(), res["L_d"].detach().float(),
+                                      res.get("L_c_ref", zero).detach().float()]))
+            lam_t.append(pinn.lam.value().detach())
+        acc = torch.stack(acc_t).double().mean(dim=0).cpu().numpy()
+        hist["lambda_c_steps"] += [float(v) for v in torch.stack(lam_t).cpu().numpy()]
         pinn.eval()
         with torch.no_grad():
             vr = pinn.losses(Vt, epoch=ep, physics=True, update_scaler=False)
@@ -424,11 +549,20 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         if epoch_callback is not None:
             epoch_callback(ep, rec)
     train_time = time.perf_counter() - t0
-    pinn.cpu()
 
+    # post-training, on the training device: one batched prediction per set, reused by the gate,
+    # the metrics and the figures
+    t1 = time.perf_counter()
+    outs_va = predict_outputs(pinn, va_segs, norm, cfg.eval_batch_samples)
+    outs_tr = predict_outputs(pinn, tr_segs, norm, cfg.eval_batch_samples)
+    gate_info = set_gate(pinn, va_segs, outs_va)
+    pinn.cpu()
     metrics = {
-        "validation": evaluate(pinn, va_segs, norm),
-        "training": evaluate(pinn, tr_segs, norm, residuals=False),
+        "validation": evaluate(pinn, va_segs, norm, outs=outs_va),
+        "training": evaluate(pinn, tr_segs, norm, residuals=False, outs=outs_tr),
+        "physics_path": path.summary() | {"notes": path.notes, "identify_time_s": t_ident},
+        "gate": gate_info,
+        "eval_time_s": time.perf_counter() - t1,
         "train_time_s": train_time,
         "preprocess_time_s": t_pre,
         "n_train_missions": len(tr_idx),
@@ -436,6 +570,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         "n_train_samples": int(sum(s.n for s in tr_segs)),
         "n_val_samples": int(sum(s.n for s in va_segs)),
         "lambda_c_final": float(pinn.lam.value().detach()),
+        "amp": amp,
         "torch_threads": torch.get_num_threads(),
         "device": str(dev),
         "nrmse_definition": "RMSE / (max - min) of the measured Q_red over the set, in %",
@@ -448,6 +583,8 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         "features": list(cfg.features),
         "outputs": list(D.OUTPUTS),
         "output_scales": {k: list(v) for k, v in pinn.output_scales().items()},
+        # Q_red = physics path + gate * (output_scales.Q_red applied to network output 0)
+        "physics_path": path.to_dict() | {"gate": float(pinn.gate)},
         "declared_effects": list(cfg.declared_effects),
         "extra_terms": list(cfg.extra_terms),
         "params": params.to_dict(),
@@ -469,6 +606,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     }
     result = TrainResult(Path(out_dir) if out_dir else None, metrics, hist, config)
     result.pinn, result.norm, result.segments = pinn, norm, (tr_segs, va_segs)
+    result.outputs = (outs_tr, outs_va)
     if out_dir is not None:
         save_model(result, cfg, progress=progress)
     return result
@@ -491,7 +629,8 @@ def save_model(result: TrainResult, cfg: TrainConfig, progress: bool = True) -> 
         from .plots import plot_training
 
         tr, va = result.segments
-        plot_training(out, result.pinn, result.norm, tr, va, result.history)
+        outs = getattr(result, "outputs", None)
+        plot_training(out, result.pinn, result.norm, tr, va, result.history, outs=outs)
     if progress:
         print(f"model written to {out}", file=sys.stderr)
 
@@ -517,14 +656,19 @@ def load_pinn(model_dir: str | Path):
     net = TwinLSTM(len(cfgd["features"]), len(cfgd["outputs"]), a["hidden"], a["layers"], a["dropout"], a.get("skip", False))
     lcfg = LossConfig(lambda_mode=t["lambda_mode"], lambda_init=t["lambda_init"], adaptive_scaling=t["adaptive_scaling"],
                       ramp_epochs=t["ramp_epochs"], washout=t["washout"])
+    pp = cfgd.get("physics_path")
+    r_mean, r_std = cfgd["output_scales"]["Q_red"]
     pinn = PINN(net, params, cfgd["declared_effects"], norm.q_mean, norm.q_std, lcfg, cfgd.get("extra_terms", []),
-                t.get("calibrate", []), t.get("calib_reg", 1e-2))
+                t.get("calibrate", []), t.get("calib_reg", 1e-2), physpath=PhysicsPath.from_dict(pp),
+                r_mean=r_mean, r_std=r_std)
     try:
         sd = torch.load(model_dir / "model.pt", weights_only=True)
     except FileNotFoundError:
         raise ValueError(f"{model_dir}: model.pt missing") from None
     missing, unexpected = pinn.load_state_dict(sd, strict=False)
-    if unexpected or set(missing) - {"calib", "lam.s_d"}:  # older models lack these (defaults reproduce them)
+    if "gate" in missing and pp:
+        pinn.gate.fill_(float(pp.get("gate", 1.0)))
+    if unexpected or set(missing) - {"calib", "lam.s_d", "gate"}:  # older models lack these (defaults reproduce them)
         raise ValueError(f"{model_dir}/model.pt does not match config.json (missing {missing}, unexpected {unexpected})")
     pinn.eval()
     return pinn, norm, cfgd
