@@ -1,27 +1,210 @@
-"""Twin benchmarks: streaming inference (ONNX Runtime) and training-step cost.
+"""Twin benchmarks.
 
-Prints medians and ratios against baselines measured in the same run:
+Default (``hdphm bench twin``): **accuracy on held-out units, per plant family and on the second plant**,
+in one run. For each data source a small fleet is written (``hdphm sim fleet --family NAME`` for every
+family ``hd_sim.families`` knows, today's plant when it knows none, and the independent plant
+``python -m tests.plants.ema2 fleet``); the first actuators train, the last ``--held-out`` are never
+seen by any fit. On the same model-rate samples of the held-out units it prints NRMSE (RMSE / range of
+the measured Q_red) and the maximum error of
 
-* streaming: ``StreamingTwin.step`` on one sample and on 100-sample blocks
-  versus the PyTorch network on the same inputs carrying the same state
-  (the baseline the ONNX export must beat or match); samples/s and the ratio
-  to the real-time rate of the model (fs_model).
-* training: one optimiser step of the PINN (data + physics loss) versus the
-  same step with lambda_c = 0 (the physics overhead).
+* ``twin``: the physics-informed twin (identified physics path + gated LSTM remainder, r1..r4 loss,
+  learnable lambda_c, adaptive scaling, ramp), ``small`` preset;
+* ``physics path``: the twin's identified torque balance alone (``hd_twin.identify``);
+* ``least squares``: the 4-term motor-side balance a competent engineer writes in an afternoon,
+  ``Q_red ~ a tau_m + b d(omega_m)/dt + c tanh(omega_m / eps) + d omega_m``, fitted by ordinary least
+  squares on the training units, ``eps`` the best in-sample of 8 log-spaced values 0.01-5 rad/s, the
+  derivative the twin's (zero-phase Butterworth at 0.25 fs + central differences); see :func:`ls_fit`;
+* ``pure LSTM``: the same network and preset with lambda_c = 0 and no physics path.
 
-Usage: ``hdphm bench twin [--extra MODEL_DIR]`` (default: a freshly trained
-tiny model on synthetic missions, so it runs without bags).
+``hdphm bench twin --extra --streaming [MODEL_DIR]``: the former streaming benchmark (ONNX Runtime vs
+PyTorch, sample by sample and in blocks; the physics overhead of one training step).
+
+Options (after ``--extra``): ``--families a,b`` (default: all, plus ``plant2``), ``--actuators N``
+(per source, default 6), ``--held-out K`` (default 2), ``--missions M`` (default 2), ``--duration S``
+(default 10), ``--epochs E`` (default: the small preset's 15), ``--seed S``, ``--keep DIR`` (keep bags).
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 
+REPO = Path(__file__).resolve().parents[1]
+
+#: Candidate Coulomb widths [rad/s at the motor] of the least-squares baseline.
+LS_EPS_GRID = np.geomspace(0.01, 5.0, 8)
+
+
+# ---- the plain least-squares baseline -------------------------------------------------------
+def _ls_columns(seg, eps: float) -> np.ndarray:
+    from hd_twin import data as D
+
+    w = seg.X[:, 1]
+    return np.column_stack([seg.X[:, 2], D.derivative(w, seg.dt), np.tanh(w / eps), w])
+
+
+def ls_fit(segs) -> tuple[float, np.ndarray]:
+    """(eps, coefficients) of Q_red ~ a tau_m + b omega_m' + c tanh(omega_m / eps) + d omega_m."""
+    best = None
+    for eps in LS_EPS_GRID:
+        A = np.vstack([_ls_columns(s, eps)[s.mask] for s in segs])
+        y = np.concatenate([s.Q_red[s.mask] for s in segs])
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        sse = float(np.sum((A @ coef - y) ** 2))
+        if best is None or sse < best[0]:
+            best = (sse, float(eps), coef)
+    return best[1], best[2]
+
+
+def ls_predict(segs, eps: float, coef: np.ndarray) -> np.ndarray:
+    return np.concatenate([_ls_columns(s, eps) @ coef for s in segs])
+
+
+# ---- data sources -----------------------------------------------------------------------------
+def _families() -> list[str]:
+    try:
+        from hd_sim.families import FAMILIES  # noqa: PLC0415
+    except ImportError:
+        return ["hd_sim"]
+    return list(FAMILIES)
+
+
+def _write_source(name: str, out: Path, a: argparse.Namespace) -> None:
+    py = sys.executable
+    if name == "plant2":
+        cmd = [py, "-m", "tests.plants.ema2", "fleet", "--units", str(a.actuators), "--missions", str(a.missions),
+               "--duration", str(a.duration), "--seed", str(a.seed), "--out", str(out)]
+    else:
+        cmd = [py, "-m", "hdphm.cli", "sim", "fleet", "--actuators", str(a.actuators), "--missions", str(a.missions),
+               "--duration", str(a.duration), "--seed", str(a.seed), "--out", str(out), "--workers", "1", "--quiet",
+               "--sim-internal-every", "0", "--profiles", "inspection,flight,sweep"]
+        if name != "hd_sim":
+            cmd += ["--family", name]
+            i = cmd.index("--profiles")
+            del cmd[i:i + 2]  # the family's own profile cycle
+    r = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd[1:5])} failed: {(r.stderr or r.stdout).strip().splitlines()[-1:]}")
+
+
+def _split_units(missions, held_out: int):
+    acts = sorted({str(m.meta.actuator_id) for m in missions})
+    if len(acts) <= held_out + 1:
+        raise ValueError(f"{len(acts)} actuators: need more than held-out + 1")
+    test = set(acts[-held_out:])
+    return [m for m in missions if str(m.meta.actuator_id) not in test], [m for m in missions if str(m.meta.actuator_id) in test]
+
+
+def _metrics(yt, yp) -> dict:
+    from hd_twin.train import q_metrics
+
+    return q_metrics(yt, yp)
+
+
+def compare_source(name: str, bag_dir: Path, a: argparse.Namespace) -> dict:
+    from hd_twin import data as D
+    from hd_twin.train import TrainConfig, evaluate, load_missions, train_twin
+
+    missions = load_missions([bag_dir], progress=False)
+    train_m, test_m = _split_units(missions, a.held_out)
+    row: dict = {"source": name, "n_train_units": len({m.meta.actuator_id for m in train_m}),
+                 "n_test_units": len({m.meta.actuator_id for m in test_m})}
+    kw = dict(plots=False, export_onnx=False, threads=a.threads, seed=a.seed)
+    if a.epochs:
+        kw["epochs"] = a.epochs
+    t0 = time.perf_counter()
+    tw = train_twin(train_m, None, TrainConfig.from_preset("small", **kw), progress=False)
+    row["t_twin_s"] = time.perf_counter() - t0
+    fs_model = tw.config["preprocessing"]["fs_model"]
+    names = tw.config["features"]
+    test_segs = [s for m in test_m for s in D.preprocess(m, fs_model, T_ref=tw.pinn.params.T_ref, names=names)]
+    met = evaluate(tw.pinn, test_segs, tw.norm, residuals=False)
+    row["twin"] = met
+    row["physics_path"] = met["physics_only"] if tw.pinn.physpath.active else None
+    row["gate"] = float(tw.pinn.gate)
+    row["path_summary"] = tw.metrics["physics_path"]
+    tr_segs = tw.segments[0] + tw.segments[1]  # the twin's training units (train + validation)
+    yt = np.concatenate([np.where(s.mask, s.Q_red, np.nan) for s in test_segs])
+    eps, coef = ls_fit(tr_segs)
+    row["ls"] = _metrics(yt, ls_predict(test_segs, eps, coef)) | {"eps": eps, "coef": coef.tolist()}
+    t0 = time.perf_counter()
+    pure = train_twin(train_m, None, TrainConfig.from_preset("small", lambda_mode="fixed", lambda_init=0.0,
+                                                             physics_path="none", **kw), progress=False)
+    row["t_pure_s"] = time.perf_counter() - t0
+    row["pure"] = evaluate(pure.pinn, test_segs, pure.norm, residuals=False)
+    return row
+
+
+def _fmt(m: dict | None) -> str:
+    if not m:
+        return "n/a"
+    return f"{m['nrmse_pct']:.3f} % / {m['max_err']:.4g}"
+
+
+def compare(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="hdphm bench twin")
+    p.add_argument("--families", help="comma-separated sources (families of hd_sim, 'hd_sim', 'plant2')")
+    p.add_argument("--actuators", type=int, default=6)
+    p.add_argument("--held-out", type=int, default=2)
+    p.add_argument("--missions", type=int, default=2)
+    p.add_argument("--duration", type=float, default=10.0)
+    p.add_argument("--epochs", type=int)
+    p.add_argument("--seed", type=int, default=3)
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--keep", help="write the bags here and keep them")
+    a = p.parse_args(argv)
+    sources = a.families.split(",") if a.families else _families() + ["plant2"]
+    tmp = None
+    root = Path(a.keep) if a.keep else Path(tmp := tempfile.mkdtemp(prefix="bench_twin_"))
+    print(f"held-out accuracy per source: {a.actuators} actuators x {a.missions} missions x {a.duration:g} s, "
+          f"the last {a.held_out} held out; twin and pure LSTM: small preset"
+          + (f", {a.epochs} epochs" if a.epochs else "") + f", seed {a.seed}, {a.threads} threads", flush=True)
+    rows = []
+    for src in sources:
+        t0 = time.perf_counter()
+        try:
+            d = root / src
+            if not d.exists():
+                _write_source(src, d, a)
+            row = compare_source(src, d, a)
+        except Exception as e:  # one failing source must not hide the others
+            print(f"  {src}: error: {type(e).__name__}: {e}", flush=True)
+            rows.append({"source": src, "error": str(e)})
+            continue
+        row["t_s"] = time.perf_counter() - t0
+        rows.append(row)
+        print(f"  {src}: done in {row['t_s']:.0f} s (gate {row['gate']:.3f}, LS eps {row['ls']['eps']:.3g} rad/s)",
+              flush=True)
+    print("\nNRMSE / max error [N*m] on held-out units (same model-rate samples for every column)\n")
+    print("| source | twin | physics path (identified) | least squares (4-term) | pure LSTM (lambda_c = 0) | gate |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        if "error" in r:
+            print(f"| {r['source']} | error: {r['error'][:80]} | | | | |")
+            continue
+        print(f"| {r['source']} | {_fmt(r['twin'])} | {_fmt(r['physics_path'])} | {_fmt(r['ls'])} | "
+              f"{_fmt(r['pure'])} | {r['gate']:.2f} |")
+    ok = [r for r in rows if "error" not in r and r["physics_path"]]
+    if ok:
+        worse = [r["source"] for r in ok if r["twin"]["nrmse_pct"] > r["physics_path"]["nrmse_pct"]]
+        ratio = [r["physics_path"]["nrmse_pct"] / r["ls"]["nrmse_pct"] for r in ok]
+        print(f"\ntwin worse than its physics path on: {worse or 'none'}; physics path / least squares NRMSE: "
+              + ", ".join(f"{r['source']} {q:.2f}x" for r, q in zip(ok, ratio)))
+    if tmp:
+        import shutil
+
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0 if all("error" not in r for r in rows) else 1
+
+
+# ---- streaming (ONNX Runtime vs PyTorch) and training-step cost --------------------------------
 def _median_time(fn, repeat: int) -> float:
     ts = []
     for _ in range(repeat):
@@ -31,19 +214,17 @@ def _median_time(fn, repeat: int) -> float:
     return statistics.median(ts)
 
 
-def main(argv: list[str] | None = None) -> int:
-    import numpy as np
+def streaming(argv: list[str]) -> int:
     import torch
 
     torch.set_num_threads(1)
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "twin"))
+    sys.path.insert(0, str(REPO / "tests" / "twin"))
     from synth import synth_fleet, synth_mission  # noqa: PLC0415
 
     from hd_twin import data as D
     from hd_twin.runtime import StreamingTwin
     from hd_twin.train import TrainConfig, _to_torch, load_pinn, stack_windows, train_twin
 
-    argv = argv or []
     tmp = None
     if argv:
         model_dir = Path(argv[0])
@@ -93,7 +274,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  streaming {kind:5s}: ONNX Runtime {n / o:10.0f} samples/s ({o / n * 1e6:7.1f} us/sample, "
               f"{n / o / fs_model:7.1f} x real time)   PyTorch baseline {n / t:10.0f} samples/s   ratio ONNX/PyTorch speed {t / o:5.2f}")
 
-    # training step: PINN vs lambda_c = 0
     segs = D.preprocess(m, fs_model)
     W = stack_windows(segs, norm, 200, 100)
     b = _to_torch(W)
@@ -114,6 +294,13 @@ def main(argv: list[str] | None = None) -> int:
     if tmp is not None:
         tmp.cleanup()
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(argv or [])
+    if argv and argv[0] == "--streaming":
+        return streaming(argv[1:])
+    return compare(argv)
 
 
 if __name__ == "__main__":  # pragma: no cover
