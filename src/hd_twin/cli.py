@@ -50,7 +50,8 @@ def _cfg_from_args(args) -> "object":
     from .train import TrainConfig
 
     over = dict(epochs=args.epochs, seed=args.seed, layers=args.layers, hidden=args.hidden, dropout=args.dropout,
-                lr=args.lr, lambda_init=args.lambda_init, threads=args.threads)
+                lr=args.lr, lambda_init=args.lambda_init, threads=args.threads,
+                batch=getattr(args, "batch", None), physics_path=getattr(args, "physics_path", None))
     if args.fs_model is not None:
         over["fs_target"] = None if args.fs_model <= 0 else args.fs_model
     if args.no_scaling:
@@ -83,6 +84,10 @@ def _add_train_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-ramp", action="store_true", help="switch off the physics ramp")
     p.add_argument("--fs-model", type=float, help="model sample rate [Hz] (0 = the bags' rate)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--batch", type=int, help="windows per optimiser step (default: the preset's)")
+    p.add_argument("--physics-path", choices=("auto", "identified", "none"),
+                   help="the twin's physics path: the torque balance identified on the training units (auto: when "
+                        "hd_twin.identify is available) plus a gated LSTM remainder, or none (the LSTM predicts Q_red)")
     p.add_argument("--features", help="network input features, comma-separated names of hd_twin.data.FEATURES "
                    "(default all); 'v1' = the 13 features of models before the torsion/friction features")
     p.add_argument("--model-config", help="JSON/YAML with declared_effects, extra_terms, params, model_version")
@@ -98,7 +103,8 @@ def _train(args) -> int:
     res = train_twin(missions, args.out, cfg)
     v = res.metrics["validation"]
     print(f"validation (held-out actuators): NRMSE {v['nrmse_pct']:.3f} %  R^2 {v['r2']:.5f}  max err {v['max_err']:.4g} N*m")
-    print(f"physics-only baseline:           NRMSE {v['physics_only']['nrmse_pct']:.3f} %  R^2 {v['physics_only']['r2']:.5f}")
+    print(f"physics path alone:              NRMSE {v['physics_only']['nrmse_pct']:.3f} %  R^2 {v['physics_only']['r2']:.5f}"
+          f"  (learned remainder gate {v.get('gate', 1.0):.3f})")
     print(f"training time {res.metrics['train_time_s']:.1f} s on {res.metrics['torch_threads']} thread(s); model in {args.out}")
     return 0
 

@@ -102,7 +102,11 @@ class PhysicsPath:
         """Q_phys [N*m] on raw input rows at the model rate (streaming)."""
         if not self.active:
             return np.zeros(len(X))
-        return self._predict(signals_from_X(X, dt, t0=t0))
+        sig = signals_from_X(X, dt, t0=t0)
+        if len(X) < 3:  # the first samples after a reset: no derivative yet, taken as zero
+            sig["alpha_m"] = np.zeros(len(X))
+            sig["alpha_f"] = np.zeros(len(X))
+        return self._predict(sig)
 
     @property
     def causal(self) -> bool:

@@ -104,7 +104,8 @@ class StreamingTwin:
     def step(self, X: np.ndarray) -> dict[str, np.ndarray]:
         """Feed ``X[n, 7]`` raw SI inputs (columns ``self.inputs``); returns SI outputs for the emitted samples.
 
-        Keys: ``Q_red`` [N*m], ``x_FS`` [m] (= u + r_b theta_m, unwrapped),
+        Keys: ``Q_red`` [N*m] (the twin: physics path + gate x remainder), ``Q_phys`` [N*m] (the
+        identified physics path alone; zeros for a model without one), ``x_FS`` [m] (= u + r_b theta_m, unwrapped),
         ``y_FS`` [m], ``index`` (rows of X the outputs belong to). Non-finite
         inputs are replaced by the training mean of their feature.
         """
@@ -114,7 +115,7 @@ class StreamingTwin:
         if X.ndim != 2 or X.shape[1] != len(self.inputs):
             raise ValueError(f"StreamingTwin.step: X must be (n, {len(self.inputs)}) with columns {self.inputs}, got {X.shape}")
         if len(X) == 0:
-            return {k: np.zeros(0) for k in OUTPUT_NAMES} | {"index": np.zeros(0, int)}
+            return {k: np.zeros(0) for k in OUTPUT_NAMES + ("Q_phys",)} | {"index": np.zeros(0, int)}
         if self._sos is not None:  # the filter must not see NaN: hold the last finite value per input
             X = X.copy()
             for j in range(X.shape[1]):
@@ -131,16 +132,17 @@ class StreamingTwin:
         self._phase = (self._phase + len(X)) % self.decimation
         Xd = Xf[idx]
         if len(Xd) == 0:
-            return {k: np.zeros(0) for k in OUTPUT_NAMES} | {"index": idx}
+            return {k: np.zeros(0) for k in OUTPUT_NAMES + ("Q_phys",)} | {"index": idx}
         F = D.features(Xd, self.N, self.decimation / self.fs_in, prev=self._prev, names=self.feature_names)
         self._prev = Xd[-1].copy()
         Z = self.norm.norm_features(F).astype(np.float32)[None]
         y, self.h, self.c = self.session.run(None, {"x": Z, "h0": self.h, "c0": self.c})
         y = y[0].astype(np.float64)
         si = [m + s * y[:, j] for j, (m, s) in enumerate(self._scales)]
+        q_phys = self._phys(Xd) if self.physpath.active else np.zeros(len(Xd))
         if self.physpath.active:
-            si[0] = self._phys(Xd) + self.gate * si[0]
-        return {"Q_red": si[0], "x_FS": si[1] + self.params["r_b"] * Xd[:, 0], "y_FS": si[2], "index": idx}
+            si[0] = q_phys + self.gate * si[0]
+        return {"Q_red": si[0], "Q_phys": q_phys, "x_FS": si[1] + self.params["r_b"] * Xd[:, 0], "y_FS": si[2], "index": idx}
 
     def _phys(self, Xd: np.ndarray) -> np.ndarray:
         """The identified physics path on the new model-rate rows, with the history since the reset."""

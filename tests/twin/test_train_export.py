@@ -19,7 +19,9 @@ def fleet():
 @pytest.fixture(scope="module")
 def model_dir(fleet, tmp_path_factory):
     out = tmp_path_factory.mktemp("twin")
-    train_twin(fleet, out, TrainConfig.from_preset("tiny", epochs=3), progress=False)
+    # physics_path="none": these tests are about the network (training, ONNX parity, streaming);
+    # the identified physics path + gated remainder are tested in test_residual.py
+    train_twin(fleet, out, TrainConfig.from_preset("tiny", epochs=3, physics_path="none"), progress=False)
     return out
 
 
@@ -69,7 +71,8 @@ def test_streaming_decimation_matches_batch(fleet, tmp_path):
     from hd_twin.runtime import StreamingTwin
 
     ms = [synth_mission(f"A{a}", i, fs=400.0, duration=2.0, seed=a * 7 + i) for a in range(3) for i in range(2)]
-    train_twin(ms, tmp_path, TrainConfig.from_preset("tiny", epochs=1, fs_target=100.0, plots=False), progress=False)
+    train_twin(ms, tmp_path, TrainConfig.from_preset("tiny", epochs=1, fs_target=100.0, plots=False,
+                                                        physics_path="none"), progress=False)
     m = synth_mission("B", 0, fs=400.0, duration=2.0, seed=5)
     pinn, norm, cfg = load_pinn(tmp_path)
     assert cfg["preprocessing"]["fs_model"] == pytest.approx(100.0)
