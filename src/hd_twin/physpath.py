@@ -133,6 +133,65 @@ class PhysicsPath:
 
         return cls("identified", Identified.from_dict(d["identified"]), list(d.get("notes", [])))
 
+    def three_body(self, params, z_min: float = 3.0):
+        """The paper's input-side parameters the identified balance determines: (params, report).
+
+        Q_red ~ a tau_m + b alpha_m + c tanh(omega_m / w) + d omega_m reads a = N eta, b = -N eta J_eq
+        (J_eq = J_in + J_CS / N^2),
+        c = -N eta T_C, d = -N eta b_visc, w = eps_omega (PHYSICS.md 2.5 with the motor-side balance);
+        each is taken over only when its coefficient is identified (|coef| >= ``z_min`` standard
+        deviations), it has the physical sign and it lies inside the parameter bounds; the rest keep
+        their prior. J_WG and J_rotor keep their ratio. The efficiency eta = a / N is reported.
+        """
+        import dataclasses as dc  # noqa: PLC0415
+
+        from .physics import _BOUNDS  # noqa: PLC0415
+
+        rep: dict = {"taken": {}, "kept": {}}
+        if not self.active:
+            return params, rep
+        idf = self.identified
+        co = dict(zip(idf.names, np.asarray(idf.coef, float)))
+        cov = np.asarray(idf.cov, float)
+        sd = dict(zip(idf.names, np.sqrt(np.clip(np.diag(cov), 0, None)))) if cov.ndim == 2 else {}
+        a = co.get("tau_m")
+        if a is None or not a > 0 or not abs(a) >= z_min * sd.get("tau_m", np.inf):
+            rep["kept"]["all"] = "load-path coefficient not identified"
+            return params, rep
+        rep["eta"] = a / params.N
+        cand = {}
+        if "alpha_m" in co:
+            # the motor-side balance sees J_eq = J_in + J_CS / N^2 (the output inertia, reflected)
+            cand["J_in"] = (-co["alpha_m"] / a - params.J_CS / params.N**2,
+                            abs(co["alpha_m"]) >= z_min * sd.get("alpha_m", np.inf))
+        if "coulomb" in co:
+            cand["T_C"] = (-co["coulomb"] / a, abs(co["coulomb"]) >= z_min * sd.get("coulomb", np.inf))
+        if "omega_m" in co:
+            cand["b_visc"] = (-co["omega_m"] / a, abs(co["omega_m"]) >= z_min * sd.get("omega_m", np.inf))
+        w = (getattr(idf, "shape", {}) or {}).get("width")
+        if w is not None:
+            cand["eps_omega"] = (float(w), bool((getattr(idf, "identified", {}) or {}).get("width", False)))
+        kw = {}
+        for name, (v, ok) in cand.items():
+            lo, hi = _BOUNDS.get(name, (0.0, np.inf)) if name != "J_in" else (1e-12, 20.0)
+            if ok and np.isfinite(v) and lo < v <= hi:
+                rep["taken"][name] = float(v)
+                if name == "J_in":
+                    f = v / params.J_in
+                    kw["J_WG"], kw["J_rotor"] = params.J_WG * f, params.J_rotor * f
+                else:
+                    kw[name] = float(v)
+            else:
+                rep["kept"][name] = f"identified value {v:.4g} not identified, of the wrong sign or out of bounds"
+        if "T_C" in kw and params.T_S > 0:
+            kw["T_S"] = max(params.T_S * kw["T_C"] / params.T_C, kw["T_C"])  # keep the static/Coulomb ratio
+        try:
+            return dc.replace(params, **kw).validate("parameters from the identified balance"), rep
+        except ValueError as e:
+            rep["kept"]["all"] = str(e)
+            rep["taken"] = {}
+            return params, rep
+
     def summary(self) -> dict:
         """Names, coefficients with standard deviations and shape parameters (for metrics/show)."""
         if not self.active:

@@ -469,6 +469,8 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     path = PhysicsPath.fit(tr_segs, cfg.physics_path)
     for s_ in tr_segs + va_segs:
         s_.Q_phys = path.predict_segment(s_)
+    # the paper's input-side parameters the identified balance determines become the physics prior
+    params, three_body = path.three_body(params) if cfg.params is None else (params, {"kept": {"all": "params given"}})
     t_ident = time.perf_counter() - t1
     norm = D.Normalizer.fit(tr_segs, cfg.features)
     rem = np.concatenate([(s_.Q_red - s_.Q_phys)[s_.mask] for s_ in tr_segs])
@@ -560,7 +562,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     metrics = {
         "validation": evaluate(pinn, va_segs, norm, outs=outs_va),
         "training": evaluate(pinn, tr_segs, norm, residuals=False, outs=outs_tr),
-        "physics_path": path.summary() | {"notes": path.notes, "identify_time_s": t_ident},
+        "physics_path": path.summary() | {"notes": path.notes, "identify_time_s": t_ident, "three_body": three_body},
         "gate": gate_info,
         "eval_time_s": time.perf_counter() - t1,
         "train_time_s": train_time,
