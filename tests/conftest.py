@@ -69,22 +69,31 @@ def plant2_case_bags(tmp_path_factory):
     three), ``held_out`` (the fourth), ``truth`` (effect, parameters, signal it shows in), ``truth_path``,
     ``signals`` (simulated arrays incl. truth, for checks only). All effects are simulated in one batch on
     first use (about 15 s on one core); each effect's bags are written when first asked for (about 5 s).
+    ``plant2_case_bags.signals(effect)`` gives the simulated arrays without writing bags.
     """
     from tests.plants import ema2
 
-    root = tmp_path_factory.mktemp("plant2_cases")
-    state: dict = {}
+    return _Plant2Cases(tmp_path_factory.mktemp("plant2_cases"), ema2)
 
-    def make(effect: str = "clean") -> dict:
-        if effect not in ema2.EFFECTS:
-            raise ValueError(f"plant2: unknown effect {effect!r}; known: {', '.join(ema2.EFFECTS)}")
-        if "sigs" not in state:
-            state["sigs"] = ema2.simulate_cases()
-        if effect not in state:
-            state[effect] = ema2.write_case(root / effect, effect, sigs=state["sigs"][effect])
-        return state[effect]
 
-    return make
+class _Plant2Cases:
+    """``cases(effect)`` -> the case dict (bags written on first ask); ``cases.signals(effect)`` -> the
+    simulated arrays only (no bag written)."""
+
+    def __init__(self, root, ema2):
+        self.root, self.ema2, self._sigs, self._cases = root, ema2, None, {}
+
+    def signals(self, effect: str = "clean") -> list:
+        if effect not in self.ema2.EFFECTS:
+            raise ValueError(f"plant2: unknown effect {effect!r}; known: {', '.join(self.ema2.EFFECTS)}")
+        if self._sigs is None:
+            self._sigs = self.ema2.simulate_cases()
+        return self._sigs[effect]
+
+    def __call__(self, effect: str = "clean") -> dict:
+        if effect not in self._cases:
+            self._cases[effect] = self.ema2.write_case(self.root / effect, effect, sigs=self.signals(effect))
+        return self._cases[effect]
 
 
 @pytest.fixture(scope="session")

@@ -284,7 +284,8 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
     dtJm, dtJf, NKp = dt / Jm, dt / Jf, N * Kp_x
     thm, thf, wm, wf = np.zeros(B), np.zeros(B), np.zeros(B), np.zeros(B)
     iq, integ, wm_est, thm_q_prev = np.zeros(B), np.zeros(B), np.zeros(B), np.zeros(B)
-    rec = {k: np.empty((n, B)) for k in ("thm_q", "thf_q", "wm_est", "wf", "iq", "Q", "twist")}
+    rec = {k: np.empty((n, B)) for k in ("thm_q", "thf_q", "wm_est", "wm", "wf", "iq", "Q", "twist")}
+    iq_all, Q_all = np.empty((n * dec, B)), np.empty((n * dec, B))  # every step: the sensors average these
     for j in range(n):
         thr_c = NKp * ref[j] + N * dref[j]
         bv, Tg = visc[j], gst[j]
@@ -309,9 +310,10 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
                 we = w
             k1e = k1 * (1.0 + eps_k * np.cos(2.0 * thm + ph_k)) if use_k else k1
             Q = (k1e + k3 * we * we) * we + ct * wd
+            iq_all[j * dec + s], Q_all[j * dec + s] = iq, Q
             if s == 0:
                 rec["thm_q"][j], rec["thf_q"][j], rec["wm_est"][j] = thm_q, thf_q, wm_est
-                rec["wf"][j], rec["iq"][j], rec["Q"][j], rec["twist"][j] = wf, iq, Q, w
+                rec["wm"][j], rec["wf"][j], rec["iq"][j], rec["Q"][j], rec["twist"][j] = wm, wf, iq, Q, w
             mag = Fc
             if use_s:
                 mag = mag + F_s * np.exp(-np.square(wm / v_s))
@@ -326,6 +328,15 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
             wf = wf + dtJf * (Q - Ka * thf - ca * wf - Tg)
             thm = thm + dt * wm
             thf = thf + dt * wf
+    # current and torque sensors: mean over the sample period centred on the sample instant (the drive
+    # oversamples and averages; instantaneous samples would alias the speed-loop chatter)
+    if dec > 1:
+        h = dec // 2
+        pad = lambda x: np.concatenate([np.repeat(x[:1], h, 0), x, np.repeat(x[-1:], dec - h, 0)])  # noqa: E731
+        iq_mean = pad(iq_all)[: n * dec].reshape(n, dec, B).mean(1)
+        Q_mean = pad(Q_all)[: n * dec].reshape(n, dec, B).mean(1)
+    else:
+        iq_mean, Q_mean = rec["iq"], rec["Q"]
     # output-side speed estimate of the drive, at the sample rate (filtered difference of the encoder)
     a_f = (1.0 / fs) / (g("tau_w") + 1.0 / fs)
     d_f = np.diff(rec["thf_q"], axis=0, prepend=rec["thf_q"][:1]) * fs
@@ -335,9 +346,9 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
     for b, m in enumerate(missions):
         r = np.random.default_rng([int(m["seed"]), 7])
         p = P[b]
-        i_meas = rec["iq"][:, b] + p["i_noise"] * r.standard_normal(n)
+        i_meas = iq_mean[:, b] + p["i_noise"] * r.standard_normal(n)
         i_meas = np.round(i_meas / p["i_lsb"]) * p["i_lsb"]
-        Qm = rec["Q"][:, b] + p["Q_noise"] * r.standard_normal(n)
+        Qm = Q_mean[:, b] + p["Q_noise"] * r.standard_normal(n)
         Qm = np.round(Qm / p["Q_lsb"]) * p["Q_lsb"]
         nT = int(duration * p["temp_rate"])
         idx = np.minimum((np.arange(nT) / p["temp_rate"] * fs).astype(int), n - 1)
@@ -349,6 +360,7 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
             "tau_m": p["k_t"] * i_meas, "Q_red": Qm, "theta_ref": ref[:, b],
             "t_temp": idx / fs, "temperature": np.round(Tm_ / p["temp_lsb"]) * p["temp_lsb"],
             "truth": {"Q": rec["Q"][:, b], "i_q": rec["iq"][:, b], "twist": rec["twist"][:, b],
+                      "omega_m": rec["wm"][:, b], "omega_f": rec["wf"][:, b],
                       "temperature": temp[:, b], "exposure": float(exposure[b]),
                       "plant": p, "effect": E[b], "wear": float(m.get("wear", 0.0)),
                       "dead_zone_total": float(bdz[b]), "k1_eff": float(k1[b]), "F_c_eff": float(Fc[b])},
