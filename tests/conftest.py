@@ -7,6 +7,9 @@
 - ``small_fleet_dir``: 3 actuators x 3 missions of 3 s (nominal wear schedule
   accelerated so wear visibly grows), one folder per actuator + fleet_truth.json.
 - ``sim_mission``: a 3 s realistic (default effects) mission in memory: (Mission, truth).
+- ``plant2_case_bags(effect="clean", duration=None)`` / ``plant2_case_bags.signals(effect)``: contract
+  bags (4 missions: 3 fit + 1 held out) of the independently written plant ``tests/plants/ema2.py``
+  with one undeclared effect; ``plant2_fleet``: a small run-to-failure fleet of it with events.csv.
 """
 
 from __future__ import annotations
@@ -62,14 +65,16 @@ def sim_mission():
 # --- plant2: the independently written EMA plant of tests/plants/ema2.py (issue 9) -----------------
 @pytest.fixture(scope="session")
 def plant2_case_bags(tmp_path_factory):
-    """Factory ``plant2_case_bags(effect="clean") -> dict`` of the independent plant (tests/plants/ema2.py).
+    """Factory ``plant2_case_bags(effect="clean", duration=None) -> dict`` of the independent plant
+    (tests/plants/ema2.py).
 
-    One actuator, four 12 s contract bags (the same four missions for every effect, seeds 0..3), one
-    undeclared effect (names: ``tests.plants.ema2.EFFECTS``). Keys: ``bags`` (4 paths), ``fit`` (first
+    One actuator, four contract bags of ``duration`` s each (default ``ema2.CASE_DURATION``), the same four
+    missions for every effect (seeds 0..3), one undeclared effect (names: ``tests.plants.ema2.EFFECTS``). Keys: ``bags`` (4 paths), ``fit`` (first
     three), ``held_out`` (the fourth), ``truth`` (effect, parameters, signal it shows in), ``truth_path``,
     ``signals`` (simulated arrays incl. truth, for checks only). All effects are simulated in one batch on
-    first use (about 15 s on one core); each effect's bags are written when first asked for (about 5 s).
-    ``plant2_case_bags.signals(effect)`` gives the simulated arrays without writing bags.
+    first use of a duration (about 1.2 s of one core per simulated second); each effect's bags are written
+    when first asked for (about 0.1 s per simulated second and bag). ``plant2_case_bags.signals(effect)``
+    gives the simulated arrays without writing bags.
     """
     from tests.plants import ema2
 
@@ -77,23 +82,26 @@ def plant2_case_bags(tmp_path_factory):
 
 
 class _Plant2Cases:
-    """``cases(effect)`` -> the case dict (bags written on first ask); ``cases.signals(effect)`` -> the
-    simulated arrays only (no bag written)."""
+    """``cases(effect, duration=None)`` -> the case dict (bags written on first ask);
+    ``cases.signals(effect, duration=None)`` -> the simulated arrays only (no bag written)."""
 
     def __init__(self, root, ema2):
-        self.root, self.ema2, self._sigs, self._cases = root, ema2, None, {}
+        self.root, self.ema2, self._sigs, self._cases = root, ema2, {}, {}
 
-    def signals(self, effect: str = "clean") -> list:
+    def signals(self, effect: str = "clean", duration: float | None = None) -> list:
         if effect not in self.ema2.EFFECTS:
             raise ValueError(f"plant2: unknown effect {effect!r}; known: {', '.join(self.ema2.EFFECTS)}")
-        if self._sigs is None:
-            self._sigs = self.ema2.simulate_cases()
-        return self._sigs[effect]
+        d = float(duration or self.ema2.CASE_DURATION)
+        if d not in self._sigs:
+            self._sigs[d] = self.ema2.simulate_cases(duration=d)
+        return self._sigs[d][effect]
 
-    def __call__(self, effect: str = "clean") -> dict:
-        if effect not in self._cases:
-            self._cases[effect] = self.ema2.write_case(self.root / effect, effect, sigs=self.signals(effect))
-        return self._cases[effect]
+    def __call__(self, effect: str = "clean", duration: float | None = None) -> dict:
+        d = float(duration or self.ema2.CASE_DURATION)
+        if (effect, d) not in self._cases:
+            self._cases[effect, d] = self.ema2.write_case(self.root / f"{effect}_{d:g}s", effect, duration=d,
+                                                          sigs=self.signals(effect, d))
+        return self._cases[effect, d]
 
 
 @pytest.fixture(scope="session")
