@@ -153,18 +153,21 @@ def test_each_effect_shows_in_its_signal_at_its_size(plant2_case_bags):
         assert amp == pytest.approx(want, abs=0.15 * want + 0.002), e
     # (2) temperature-dependent viscosity b(T) = b_ref exp(-c (T - T_ref)): c by profile least squares over
     #     the four missions pooled (they start at different temperatures and warm up)
-    grid = np.linspace(-0.02, 0.06, 33)
+    grid = np.linspace(-0.02, 0.06, 17)
     for e in ("temp_viscosity", "ripple_temp_viscosity", "clean"):
+        base, ys, wT = [], [], []
+        for s in sigs(e):
+            Xs, y = _motor_rows(s, (_ripple, _rippls))
+            ok = np.abs(np.gradient(s["omega_m"], 1e-3)) < 3000  # the rows _motor_rows keeps
+            T = np.interp(s["t"], s["t_temp"], s["temperature"])
+            base.append(np.delete(Xs, 3, 1))  # the plain viscous column is replaced by b(T) omega
+            ys.append(y)
+            wT.append((s["omega_m"], T - P["T_ref"], ok))
+        X0, y = np.concatenate(base), np.concatenate(ys)
         sse = []
         for c in grid:
-            X, y = [], []
-            for s in sigs(e):
-                T = np.interp(s["t"], s["t_temp"], s["temperature"])
-                Xs, ys = _motor_rows(s, (lambda s, T=T, c=c: s["omega_m"] * np.exp(-c * (T - P["T_ref"])),
-                                         _ripple, _rippls))
-                X.append(np.delete(Xs, 3, 1))  # the plain viscous column is replaced by b(T) omega
-                y.append(ys)
-            X, y = np.concatenate(X), np.concatenate(y)
+            col = np.concatenate([_lp(w * np.exp(-c * dT))[ok] for w, dT, ok in wT])
+            X = np.column_stack([X0, col])
             sse.append(np.sum((y - X @ _fit(X, y)) ** 2))
         c_hat = grid[int(np.argmin(sse))]
         want = E[e].get("visc_temp_coeff", 0.0)
