@@ -216,7 +216,9 @@ def test_fleet_fails_at_truth_threshold_and_events_match(plant2_fleet):
 
     d, events, truth = plant2_fleet["dir"], plant2_fleet["events"], plant2_fleet["truth"]
     fail = {r["actuator_id"]: int(r["mission_index"]) for r in events if r["event"] == "failure"}
+    removal = {r["actuator_id"]: int(r["mission_index"]) for r in events if r["event"] == "removal"}
     assert len(fail) >= 2, "the small fleet should see failures"
+    assert set(r["event"] for r in events) <= {"failure", "removal", "inspection"}
     for u in truth["units"]:
         uid, ms = u["actuator_id"], u["missions"]
         bags = sorted((d / uid).glob("mission_*.mcap"))
@@ -225,7 +227,10 @@ def test_fleet_fails_at_truth_threshold_and_events_match(plant2_fleet):
         assert all(np.diff(wear_start) > 0)
         if u["failure_mission"] is None:
             assert uid not in fail and ms[-1]["wear_end"] < u["threshold"]
+            if u["removal_mission"] is not None:  # removed healthy at the start of that mission: censored
+                assert removal[uid] == u["removal_mission"] == len(bags)
             continue
+        assert uid not in removal
         f = u["failure_mission"]
         assert fail[uid] == f == len(bags)  # found failed at the start of mission f: flew 0..f-1
         assert ms[-1]["wear_end"] >= u["threshold"] > ms[-1]["wear_start"]
@@ -254,5 +259,16 @@ def test_cli_mission_writes_a_valid_bag(tmp_path):
                         "1.5", "--seed", "5", "--out", str(out), "--truth", str(tmp_path / "t.json")],
                        cwd=REPO, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    _check_bag(out)
+    m = _check_bag(out)
     assert json.loads((tmp_path / "t.json").read_text())["effect"]["ripple_amp"] == 0.04
+    # an independent decoder (mcap-ros2-support's own reader) agrees with ours on every joint-state message
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(out, "rb") as f:
+        rd = make_reader(f, decoder_factories=[DecoderFactory()])
+        js = [msg for _, _, _, msg in rd.iter_decoded_messages(topics=["/hd/joint_states"])]
+    assert len(js) == m.n and list(js[0].name) == ["motor", "output"]
+    np.testing.assert_array_equal([x.position[0] for x in js], m.signal("theta_m"))
+    np.testing.assert_array_equal([x.effort[1] for x in js], m.signal("Q_red"))
+    assert js[7].header.stamp.nanosec == 7_000_000
