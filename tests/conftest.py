@@ -57,3 +57,96 @@ def sim_mission():
     from hd_sim import simulate_mission
 
     return simulate_mission(None, None, "inspection", 3, duration=3.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Plant families (hd_sim.families, issue 9): structurally different plants, built once per run.
+# ---------------------------------------------------------------------------------------------
+#: The structurally different families every estimator test should also pass on (not ``default``).
+FAMILY_WORLD = ("smooth-cubic", "deadzone-lugre", "hysteretic-robot")
+
+
+class FamilyCase:
+    """Short missions of one actuator of a family: ``bags`` (paths), ``missions``, ``truths``, ``units``."""
+
+    def __init__(self, family, effect, bags, missions, truths, units):
+        self.family, self.effect = family, effect
+        self.bags, self.missions, self.truths, self.units = bags, missions, truths, units
+
+    def __repr__(self):
+        return f"FamilyCase({self.family!r}, effect={self.effect!r}, {len(self.bags)} bags)"
+
+
+def _family_case(root, family, effect=None, n_missions=4, duration=4.0, seed=0, preset="baseline"):
+    from hd_bag import write_mission
+    from hd_sim import EffectSet, sample_population, simulate_mission
+    from hd_sim.families import family_unit, get_family
+
+    fam = get_family(family)
+    unit = family_unit(family, sample_population(1, seed, id_prefix=f"FAM{seed}")[0], EffectSet.preset(preset), seed)
+    eff = unit.effects.with_on(effect) if effect else unit.effects
+    out = root / f"{family}__{effect or 'clean'}__{n_missions}x{duration:g}s_s{seed}"
+    out.mkdir(parents=True, exist_ok=True)
+    bags, missions, truths = [], [], []
+    for i in range(n_missions):
+        prof = fam.profiles[i % len(fam.profiles)]
+        m, tr = simulate_mission(unit.params, eff, prof, 1000 * seed + i, duration=duration, fs=unit.fs,
+                                 mission_index=i, operating_hours=10.0 * i)
+        path = out / f"{unit.params['actuator_id']}_m{i:04d}.mcap"
+        write_mission(path, m, sim=tr)
+        bags.append(path)
+        missions.append(m)
+        truths.append(tr)
+    return FamilyCase(family, effect, bags, missions, truths, [unit])
+
+
+@pytest.fixture(scope="session")
+def family_names():
+    """Names of the structurally different plant families (``FAMILY_WORLD``)."""
+    return FAMILY_WORLD
+
+
+@pytest.fixture(scope="session")
+def family_case_bags(tmp_path_factory):
+    """Factory ``family_case_bags(family, effect=None, n_missions=4, duration=4.0, seed=0, preset="baseline")
+    -> FamilyCase``: one actuator of the family (its laws, gear ratio, sensors, log rate drawn, seeded) on
+    top of the preset, ``effect`` (a registry effect name, the undeclared one) switched on, ``n_missions``
+    missions cycling the family's test profiles, written as contract bags with ``/sim`` truth. Cached per
+    session: the same arguments return the same object."""
+    root = tmp_path_factory.mktemp("family_cases")
+    cache = {}
+
+    def make(family, effect=None, n_missions=4, duration=4.0, seed=0, preset="baseline"):
+        key = (family, effect, int(n_missions), float(duration), int(seed), preset)
+        if key not in cache:
+            cache[key] = _family_case(root, *key)
+        return cache[key]
+
+    return make
+
+
+def _family_fleet(root, family, n_actuators=3, n_missions=12, duration=2.0, seed=0, mission_hours=1.2e4):
+    from hd_sim.fleet import simulate_fleet
+
+    out = root / f"{family}_{n_actuators}x{n_missions}_s{seed}"
+    simulate_fleet(n_actuators, n_missions, out, seed=seed, duration=duration, progress=False, family=family,
+                   sim_internal_every=0, overrides={"mission_hours": mission_hours})
+    return out
+
+
+@pytest.fixture(scope="session")
+def family_fleet(tmp_path_factory):
+    """Factory ``family_fleet(family, n_actuators=3, n_missions=12, duration=2.0, seed=0, mission_hours=1.2e4)
+    -> Path``: a small run-to-failure fleet of the family (default realistic effects under the family's laws;
+    wear accelerated so units fail within ~12 missions), ``DIR/<actuator>/*.mcap`` + ``fleet_truth.json``
+    (per unit: ``family`` draws and laws, health per mission, ``eol_mission``). Cached per session."""
+    root = tmp_path_factory.mktemp("family_fleets")
+    cache = {}
+
+    def make(family, n_actuators=3, n_missions=12, duration=2.0, seed=0, mission_hours=1.2e4):
+        key = (family, int(n_actuators), int(n_missions), float(duration), int(seed), float(mission_hours))
+        if key not in cache:
+            cache[key] = _family_fleet(root, *key)
+        return cache[key]
+
+    return make
