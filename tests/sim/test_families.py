@@ -343,3 +343,15 @@ def test_cli_family_list_and_fleet(tmp_path, capsys):
         main(["sim", "fleet", "--family", "nope", "--actuators", "1", "--missions", "1", "--out", str(d / "x")])
     assert main(["sim", "mission", "--family", "hysteretic-robot", "--actuator", "0", "--duration", "0.5",
                  "--out", str(tmp_path / "h.mcap"), "--law", "torsion=bouc_wen"]) == 0
+
+
+def test_plant_world_gives_every_world_one_interface(plant_world):
+    """Every world (three hd_sim families + plant2): clean case bags that pass the contract (no errors)."""
+    from hd_bag import read_mission, validate_bag
+
+    c = plant_world.case()
+    assert len(c["bags"]) == 4 and c["held_out"] == c["bags"][-1] and c["fit"] == c["bags"][:3]
+    assert c["truth"]["effect"] == "clean" and plant_world.effects
+    for b in c["bags"][:2]:
+        assert [v for v in validate_bag(b) if v.severity == "error"] == []
+        assert read_mission(b).report.suspect == []
