@@ -78,26 +78,11 @@ class FamilyCase:
 
 
 def _family_case(root, family, effect=None, n_missions=4, duration=4.0, seed=0, preset="baseline"):
-    from hd_bag import write_mission
-    from hd_sim import EffectSet, sample_population, simulate_mission
-    from hd_sim.families import family_unit, get_family
+    from hd_sim.families import write_family_case
 
-    fam = get_family(family)
-    unit = family_unit(family, sample_population(1, seed, id_prefix=f"FAM{seed}")[0], EffectSet.preset(preset), seed)
-    eff = unit.effects.with_on(effect) if effect else unit.effects
     out = root / f"{family}__{effect or 'clean'}__{n_missions}x{duration:g}s_s{seed}"
-    out.mkdir(parents=True, exist_ok=True)
-    bags, missions, truths = [], [], []
-    for i in range(n_missions):
-        prof = fam.profiles[i % len(fam.profiles)]
-        m, tr = simulate_mission(unit.params, eff, prof, 1000 * seed + i, duration=duration, fs=unit.fs,
-                                 mission_index=i, operating_hours=10.0 * i)
-        path = out / f"{unit.params['actuator_id']}_m{i:04d}.mcap"
-        write_mission(path, m, sim=tr)
-        bags.append(path)
-        missions.append(m)
-        truths.append(tr)
-    return FamilyCase(family, effect, bags, missions, truths, [unit])
+    r = write_family_case(out, family, effect, n_missions=n_missions, duration=duration, seed=seed, preset=preset)
+    return FamilyCase(family, effect, r["bags"], r["missions"], r["truths"], [r["unit"]])
 
 
 @pytest.fixture(scope="session")

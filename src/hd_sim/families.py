@@ -187,6 +187,45 @@ def family_unit(name: str, params: Mapping[str, Any], base: EffectSet | None = N
     return FamilyUnit(fam.name, p, eff, rate, drawn)
 
 
+def write_family_case(out_dir, family: str, effect: str | None = None, params: Mapping[str, float] | None = None,
+                      *, n_missions: int = 4, duration: float = 4.0, seed: int = 0, preset: str = "baseline",
+                      profiles: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Test missions of one actuator of ``family`` with one undeclared ``effect`` on, as contract bags.
+
+    The unit (``sample_population(1, seed, id_prefix=f"FAM{seed}")``) gets the family's draws on top of the
+    ``preset`` effect set, then ``effect`` on and ``params`` (``{"EFFECT.KEY": value}``) set. Mission i flies
+    ``profiles[i % len]`` (default: the family's test profiles), seed ``1000 seed + i``. Bags (with
+    ``/sim`` truth) go to ``out_dir/<actuator>_mNNNN.mcap``. Returns ``{"bags", "fit" (all but the last),
+    "held_out" (the last), "missions", "truths", "unit"}``.
+    """
+    from pathlib import Path
+
+    from hd_bag import write_mission
+
+    from .params import sample_population
+    from .plant import simulate_mission
+
+    fam = get_family(family)
+    unit = family_unit(family, sample_population(1, seed, id_prefix=f"FAM{seed}")[0], EffectSet.preset(preset), seed)
+    eff = unit.effects.with_on(effect) if effect else unit.effects
+    if params:
+        eff = eff.with_params(**params)
+    profs = tuple(profiles) if profiles else fam.profiles
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    bags, missions, truths = [], [], []
+    for i in range(int(n_missions)):
+        m, tr = simulate_mission(unit.params, eff, profs[i % len(profs)], 1000 * int(seed) + i, duration=duration,
+                                 fs=unit.fs, mission_index=i, operating_hours=10.0 * i)
+        path = out / f"{unit.params['actuator_id']}_m{i:04d}.mcap"
+        write_mission(path, m, sim=tr)
+        bags.append(path)
+        missions.append(m)
+        truths.append(tr)
+    return {"bags": bags, "fit": bags[:-1], "held_out": bags[-1], "missions": missions, "truths": truths,
+            "unit": unit}
+
+
 def family_table(markdown: bool = False) -> str:
     """``hdphm sim family --list``: name, laws, drawn ranges, what it resembles."""
     def spec_text(spec):
@@ -214,4 +253,4 @@ def family_table(markdown: bool = False) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["FAMILIES", "Family", "FamilyUnit", "family_unit", "family_table", "get_family", "N_NOM"]
+__all__ = ["FAMILIES", "Family", "FamilyUnit", "family_unit", "family_table", "get_family", "write_family_case", "N_NOM"]
