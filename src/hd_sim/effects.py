@@ -390,6 +390,7 @@ def laws_table(markdown: bool = False) -> str:
             if choice == "bouc_wen":
                 doc = "linear mesh spring + Bouc-Wen hysteresis (the hysteresis effect)"
             if markdown:
+                doc = doc.replace("|", "\\|")
                 lines.append(f"| {slot} | `{choice}` | {', '.join(f'`{n}`' for n in names) or '-'} | {doc} |")
             else:
                 lines.append(f"  {slot}={choice:12s} effects on: {','.join(names) or '-'}")
