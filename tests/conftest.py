@@ -7,9 +7,6 @@
 - ``small_fleet_dir``: 3 actuators x 3 missions of 3 s (nominal wear schedule
   accelerated so wear visibly grows), one folder per actuator + fleet_truth.json.
 - ``sim_mission``: a 3 s realistic (default effects) mission in memory: (Mission, truth).
-- ``plant2_case_bags(effect="clean", duration=None)`` / ``plant2_case_bags.signals(effect)``: contract
-  bags (4 missions: 3 fit + 1 held out) of the independently written plant ``tests/plants/ema2.py``
-  with one undeclared effect; ``plant2_fleet``: a small run-to-failure fleet of it with events.csv.
 """
 
 from __future__ import annotations
@@ -62,10 +59,6 @@ def sim_mission():
     return simulate_mission(None, None, "inspection", 3, duration=3.0)
 
 
-<<<<<<< HEAD
-# --- plant2: the independently written EMA plant of tests/plants/ema2.py (issue 9); fixtures live there
-from tests.plants.fixtures import plant2_case_bags, plant2_fleet  # noqa: E402,F401
-=======
 # ---------------------------------------------------------------------------------------------
 # Plant families (hd_sim.families, issue 9): structurally different plants, built once per run.
 # ---------------------------------------------------------------------------------------------
@@ -117,34 +110,6 @@ def family_case_bags(tmp_path_factory):
     return make
 
 
-# --- plant2: the independently written EMA plant of tests/plants/ema2.py (issue 9) -----------------
-@pytest.fixture(scope="session")
-def plant2_case_bags(tmp_path_factory):
-    """Factory ``plant2_case_bags(effect="clean") -> dict`` of the independent plant (tests/plants/ema2.py).
-
-    One actuator, four 12 s contract bags (the same four missions for every effect, seeds 0..3), one
-    undeclared effect (names: ``tests.plants.ema2.EFFECTS``). Keys: ``bags`` (4 paths), ``fit`` (first
-    three), ``held_out`` (the fourth), ``truth`` (effect, parameters, signal it shows in), ``truth_path``,
-    ``signals`` (simulated arrays incl. truth, for checks only). All effects are simulated in one batch on
-    first use (about 15 s on one core); each effect's bags are written when first asked for (about 5 s).
-    """
-    from tests.plants import ema2
-
-    root = tmp_path_factory.mktemp("plant2_cases")
-    state: dict = {}
-
-    def make(effect: str = "clean") -> dict:
-        if effect not in ema2.EFFECTS:
-            raise ValueError(f"plant2: unknown effect {effect!r}; known: {', '.join(ema2.EFFECTS)}")
-        if "sigs" not in state:
-            state["sigs"] = ema2.simulate_cases()
-        if effect not in state:
-            state[effect] = ema2.write_case(root / effect, effect, sigs=state["sigs"][effect])
-        return state[effect]
-
-    return make
-
-
 def _family_fleet(root, family, n_actuators=3, n_missions=12, duration=2.0, seed=0, mission_hours=1.2e4):
     from hd_sim.fleet import simulate_fleet
 
@@ -187,24 +152,8 @@ def family_fleet(tmp_path_factory):
     return make
 
 
-@pytest.fixture(scope="session")
-def plant2_fleet(tmp_path_factory):
-    """A small run-to-failure fleet of the independent plant: ``{"dir", "events", "truth"}``.
-
-    4 units, at most 10 missions of 3 s each (nominal life 5 missions, unit scatter), inspections every
-    third mission. ``dir/EMA2-Uxx/mission_000.mcap`` ... (missions flown only), ``dir/events.csv``
-    (``actuator_id,mission_index,event,quantity,value``), ``dir/fleet_truth.json`` (true wear per mission,
-    thresholds, failure missions: scoring only).
-    """
-    import csv
-
-    from tests.plants import ema2
-
-    out = tmp_path_factory.mktemp("plant2_fleet")
-    truth = ema2.fleet(out, units=4, missions=10, duration=3.0, seed=3, life_missions=5.0, inspect_every=3)
-    with open(out / "events.csv") as f:
-        events = list(csv.DictReader(f))
-    return {"dir": out, "events": events, "truth": truth}
+# --- plant2: the independently written EMA plant of tests/plants/ema2.py (issue 9); fixtures live there
+from tests.plants.fixtures import plant2_case_bags, plant2_fleet  # noqa: E402,F401
 
 
 # --- every world at once: the hd_sim families + the independent plant2 ----------------------------------
@@ -271,4 +220,3 @@ def plant_world(request):
     """Parametrised over ``PLANT_WORLD`` (smooth-cubic, deadzone-lugre, hysteretic-robot, plant2): a
     :class:`World`; its bags and fleets are built on first use and cached for the session."""
     return World(request.param, request)
->>>>>>> simfam
