@@ -231,6 +231,8 @@ def test_oracle_progpy_metrics():
 
 
 def test_crps_and_pit_equal_a_direct_computation_from_samples():
+    from scipy import stats
+
     for t, p50, p5, p95, eol, s in _histories(1):
         m = M.score_history(t, p50, p5, p95, eol, samples=s)
         rt = eol - t
@@ -238,6 +240,10 @@ def test_crps_and_pit_equal_a_direct_computation_from_samples():
         direct_pit = [np.mean(x < r) + 0.5 * np.mean(x == r) for x, r in zip(s, rt)]
         assert m["crps_mean"] == pytest.approx(np.mean(direct_crps), rel=1e-12)
         assert m["pit"] == pytest.approx(direct_pit, abs=1e-15)
+        # = progpy's calc_metrics "ground truth percentile" / 100 (scipy percentileofscore, ties split alike)
+        assert m["pit"] == pytest.approx([stats.percentileofscore(x, r) / 100 for x, r in zip(s, rt)], abs=1e-12)
+    # ties split at the midpoint (discrete RUL steps)
+    assert M.score_history([0.0], [2.0], [1.0], [3.0], 2.0, samples=[np.array([1, 2, 2, 3.0])])["pit"] == [0.5]
 
 
 def test_aggregate_reads_old_reports_and_refuses_mixed_conventions():
