@@ -76,12 +76,13 @@ def _report(title: str, names: list[str], po: list, pn: list) -> dict:
     if "alpha_lambda_beta_pass_rate" in an:
         print(f"  alpha-lambda pass rate (beta={pn[0]['beta']})   {an['alpha_lambda_beta_pass_rate']}")
     print(f"  infinite values capped: {sum(u.get('n_inf_capped', 0) for u in pn)}")
-    per = {}
+    per, shown = {}, 0
     for nm, o, n in zip(names, po, pn):
         per[nm] = {"old": {k: o.get(k) for k in ("cra", "relative_accuracy_lambda_0.5", "mae", "prognostic_horizon")},
                    "new": {k: n.get(k) for k in KEYS}}
         ch = [k for k in ("cra", "relative_accuracy_lambda_0.5", "mae") if abs(o[k] - n[k]) > 5e-3]
-        if ch:
+        if ch and shown < 8:
+            shown += 1
             print(f"    {nm}: " + ", ".join(f"{k} {o[k]:.3f} -> {n[k]:.3f}" for k in ch))
     return {"old": ao, "new": an, "per_unit": per}
 
