@@ -72,7 +72,8 @@ def _report(title: str, names: list[str], po: list, pn: list) -> dict:
             continue
         moved = o is None or n is None or abs(o - n) > 5e-3
         print(f"  {k:30s} {_f(o)} -> {_f(n)}{'   moved' if moved else ''}")
-    print(f"  alpha-lambda pass rate (point)  {ao.get('alpha_lambda_pass_rate')} -> {an.get('alpha_lambda_point_pass_rate')}")
+    print(f"  alpha-lambda pass rate (point)  {ao.get('alpha_lambda_pass_rate')} -> "
+          f"{an.get('alpha_lambda_point_pass_rate')}")
     if "alpha_lambda_beta_pass_rate" in an:
         print(f"  alpha-lambda pass rate (beta={pn[0]['beta']})   {an['alpha_lambda_beta_pass_rate']}")
     print(f"  infinite values capped: {sum(u.get('n_inf_capped', 0) for u in pn)}")

@@ -236,7 +236,8 @@ def test_crps_and_pit_equal_a_direct_computation_from_samples():
     for t, p50, p5, p95, eol, s in _histories(1):
         m = M.score_history(t, p50, p5, p95, eol, samples=s)
         rt = eol - t
-        direct_crps = [np.mean(np.abs(x - r)) - 0.5 * np.mean(np.abs(x[:, None] - x[None, :])) for x, r in zip(s, rt)]
+        direct_crps = [np.mean(np.abs(x - r)) - 0.5 * np.mean(np.abs(x[:, None] - x[None, :]))
+                       for x, r in zip(s, rt)]
         direct_pit = [np.mean(x < r) + 0.5 * np.mean(x == r) for x, r in zip(s, rt)]
         assert m["crps_mean"] == pytest.approx(np.mean(direct_crps), rel=1e-12)
         assert m["pit"] == pytest.approx(direct_pit, abs=1e-15)
@@ -252,4 +253,5 @@ def test_aggregate_reads_old_reports_and_refuses_mixed_conventions():
     assert a["alpha_lambda_point_pass_rate"] == {"0.5": 1.0} and a["ph_beta_sustained"] == 12.0
     t, p50, p5, p95, eol, s = _histories()[0]
     with pytest.raises(ValueError, match="convention"):
-        M.aggregate([M.score_history(t, p50, p5, p95, eol), M.score_history(t, p50, p5, p95, eol, convention="progpy")])
+        M.aggregate([M.score_history(t, p50, p5, p95, eol),
+                     M.score_history(t, p50, p5, p95, eol, convention="progpy")])
