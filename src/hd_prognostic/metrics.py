@@ -317,7 +317,7 @@ def inf_cap(t, t_eol: float, values, rul_horizon: float | None = None) -> tuple[
     """
     r_max = float(t_eol - _arr(t)[0])
     if rul_horizon is not None and np.isfinite(rul_horizon):
-        h, src = float(rul_horizon), "forecast horizon H"
+        h, src = float(rul_horizon), "the forecast horizon (rul_horizon)"
     else:
         fin = [float(np.max(v[np.isfinite(v)])) for v in (np.asarray(x, float).ravel() for x in values)
                if np.isfinite(v).any()]
