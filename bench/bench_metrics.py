@@ -6,15 +6,15 @@
 * ``--virkler`` / ``--battery``: runs the real-data prognoses exactly as
   ``hdphm prognostic virkler`` / ``battery`` do (same defaults) and scores
   every unit's in-memory history twice: with ``hd_prognostic.metrics`` of this
-  tree and with the one of git revision ``REV`` (default ``main``; read with
-  ``git show``). The predictions are identical, so every difference is the
-  metrics' own.
+  tree and with the one of git revision ``REV`` (read with ``git show``;
+  default a459c52, the last before issue 17). The predictions are identical,
+  so every difference is the metrics' own.
 * ``--eval-dir DIR --fleet DIR``: the histories that ``hdphm prognostic eval``
   wrote (``rul_*.json``, quantile grid as samples) against the fleet's
   ``fleet_truth.json``, scored both ways.
-* Always: time of ``score_history`` (with samples) vs progpy's alpha-lambda +
-  PH + CRA on the same histories (ratio in the same run), if progpy is
-  installed.
+* Always: time of the metrics progpy also computes (alpha-lambda beta x3, PH
+  first entry, CRA; progpy convention) vs progpy's own functions on the same
+  histories (ratio in the same run), if progpy is installed.
 
 Prints per-aggregate ``key: old -> new`` (``moved`` marks differences).
 """
@@ -151,7 +151,8 @@ def _speed(units: list[tuple]) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="hdphm bench metrics", description=__doc__.splitlines()[0])
-    ap.add_argument("--old", default="main", help="git revision whose metrics.py is the 'old' side (default main)")
+    ap.add_argument("--old", default="a459c52", help="git revision whose metrics.py is the 'old' side (default a459c52: "
+                    "the metrics before issue 17)")
     ap.add_argument("--virkler", action="store_true")
     ap.add_argument("--battery", action="store_true")
     ap.add_argument("--regen-nu", type=float, default=0.0)
