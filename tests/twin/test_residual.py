@@ -4,7 +4,8 @@
 * end to end on synthetic missions: the physics path is identified and stored, the twin's held-out
   NRMSE is not above its physics path's, ONNX streaming equals batch (remainder exactly, the
   physics path exactly when the whole segment is one call);
-* on today's plant (a small hd_sim fleet, one unit held out) and on the independent plant2 (three
+* on today's plant (a small hd_sim fleet, one unit held out), on every structurally different family
+  (one unit, three missions fit, the fourth held out) and on the independent plant2 (three
   missions fit, the fourth held out): the twin is not worse than its physics path, and the physics path
   is within 2x of the plain 4-term least-squares balance (NRMSE and max error).
 """
@@ -161,3 +162,17 @@ def test_never_worse_on_the_independent_plant(plant2_case_bags):
 
     case = plant2_case_bags("clean")
     _check_never_worse([read_mission(b) for b in case["fit"]], [read_mission(case["held_out"])])
+
+
+@pytest.mark.parametrize("family", ["smooth-cubic", "deadzone-lugre", "hysteretic-robot"])
+def test_never_worse_on_every_family(family, family_case_bags):
+    """Each structurally different hd_sim family (tests/conftest.py FAMILY_WORLD): one unit's clean
+    missions, three fit, the fourth held out."""
+    from tests.conftest import FAMILY_WORLD
+
+    assert family in FAMILY_WORLD
+    from hd_bag import read_mission
+
+    case = family_case_bags(family, None, n_missions=4, duration=4.0)
+    ms = [read_mission(b) for b in case.bags]  # what an operator has: the bags
+    _check_never_worse(ms[:3], ms[3:])
