@@ -94,6 +94,23 @@ def _write_source(name: str, out: Path, a: argparse.Namespace) -> None:
         raise RuntimeError(f"{' '.join(cmd[1:5])} failed: {(r.stderr or r.stdout).strip().splitlines()[-1:]}")
 
 
+def _common_rate(missions):
+    """Missions the twin can share one model rate on (mixed log rates: the base rate that keeps the most
+    missions, each an integer multiple of it within 5 %), and a note on the rest."""
+    rates = sorted({float(m.fs) for m in missions})
+
+    def fits(fs, base):
+        k = round(fs / base)
+        return k >= 1 and abs(fs / k - base) <= 0.05 * base
+
+    base = max(rates, key=lambda b: (sum(fits(m.fs, b) for m in missions), -b))
+    keep = [m for m in missions if fits(m.fs, base)]
+    note = "" if len(keep) == len(missions) else (
+        f"log rates {sorted({round(r) for r in rates})} Hz: {len(missions) - len(keep)} missions not an integer "
+        f"multiple of {base:.0f} Hz left out")
+    return keep, note
+
+
 def _split_units(missions, held_out: int):
     acts = sorted({str(m.meta.actuator_id) for m in missions})
     if len(acts) <= held_out + 1:
@@ -112,9 +129,11 @@ def compare_source(name: str, bag_dir: Path, a: argparse.Namespace) -> dict:
     from hd_twin import data as D
     from hd_twin.train import TrainConfig, evaluate, load_missions, train_twin
 
-    missions = load_missions([bag_dir], progress=False)
+    missions, note = _common_rate(load_missions([bag_dir], progress=False))
+    if note:
+        print(f"  {name}: {note}", flush=True)
     train_m, test_m = _split_units(missions, a.held_out)
-    row: dict = {"source": name, "n_train_units": len({m.meta.actuator_id for m in train_m}),
+    row: dict = {"source": name, "note": note, "n_train_units": len({m.meta.actuator_id for m in train_m}),
                  "n_test_units": len({m.meta.actuator_id for m in test_m})}
     kw = dict(plots=False, export_onnx=False, threads=a.threads, seed=a.seed)
     if a.epochs:
