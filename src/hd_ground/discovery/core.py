@@ -357,9 +357,10 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
                 continue
             if cand.shapes and reshape is not None and not reshape(gi, cur_idx):
                 continue
-            if cand.positive and gram.coef(cur_idx + cols)[-1] <= 0:
+            trial = _model(base_idx, groups, selected + [gi])
+            if cand.positive and gram.coef(trial)[-1] <= 0:
                 continue  # the physics needs a positive coefficient: this variant is not that effect
-            per_fam.setdefault(cand.family, []).append((gi, gram.cv_sse(cur_idx + cols)))
+            per_fam.setdefault(cand.family, []).append((gi, gram.cv_sse(trial)))
         for fam, lst in per_fam.items():
             # variants of a family that explain the data equally well (within 10 % of the best variant's
             # improvement) are not distinguishable here: keep the first, i.e. the library's preferred reading
@@ -382,7 +383,7 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             trace.append(rec)
             break
         tcols = _tcols(groups, gi)
-        wald = gram.jackknife_wald(cur_idx + groups[gi][1], tcols)
+        wald = gram.jackknife_wald(_model(base_idx, groups, selected + [gi]), tcols)
         rec["wald"] = wald
         if wald >= _wald_threshold(len(tcols), opt.wald_sigmas) and cand.shapes and confirm:
             shape_ok, shape_note = confirm(gi, cur_idx)
@@ -404,14 +405,14 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         trace.append(rec)
         selected.append(gi)
         fams_used.add(cand.family)
-        cur_idx = cur_idx + groups[gi][1]
+        cur_idx = _model(base_idx, groups, selected)
         cur = e
     # backward: drop groups that no longer earn their place
     changed = True
     while changed and selected:
         changed = False
         for gi in list(selected):
-            idx = list(base_idx) + [c for gj in selected if gj != gi for c in groups[gj][1]]
+            idx = _model(base_idx, groups, [gj for gj in selected if gj != gi])
             e = gram.cv_sse(idx)
             t = _paired_t(e, cur)  # how many standard errors the group's removal raises the CV error
             if (e.sum() - cur.sum()) / cur.sum() < opt.min_gain / 2 or t < opt.se_rule:
@@ -425,14 +426,14 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             continue
         # identification in the final model: a group may lose it to one added after it (collinear groups
         # share the same structure); drop the least identified one, then look again
-        idx = list(base_idx) + [c for gj in selected for c in groups[gj][1]]
+        idx = _model(base_idx, groups, selected)
         z = [(gram.jackknife_wald(idx, _tcols(groups, gi)) / _wald_threshold(len(_tcols(groups, gi)), opt.wald_sigmas),
               gi)
              for gi in selected]
         zmin, gi = min(z)
         if zmin < 1.0:
             selected.remove(gi)
-            rest = list(base_idx) + [c for gj in selected for c in groups[gj][1]]
+            rest = _model(base_idx, groups, selected)
             e = gram.cv_sse(rest)
             trace.append({"step": "drop (unidentified)", "candidate": f"{groups[gi][0].name}[{groups[gi][0].family}]",
                           "loss": float((e.sum() - cur.sum()) / cur.sum()),
@@ -440,6 +441,13 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             cur = e
             changed = True
     return selected, trace
+
+
+def _model(base_idx: list[int], groups, sel: list[int]) -> list[int]:
+    """Columns of the model baseline + groups ``sel`` (in that order); a group may replace baseline columns
+    (``Candidate.replace_idx``, e.g. a Stribeck group re-identifies the Coulomb transition and takes T_C)."""
+    gone = {c for gi in sel for c in getattr(groups[gi][0], "replace_idx", ())}
+    return [c for c in base_idx if c not in gone] + [c for gi in sel for c in groups[gi][1]]
 
 
 def _tcols(groups, gi) -> list[int]:
@@ -590,6 +598,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     # the cross-validated profile search (hd_twin.identify); never a constant of one simulator
     eps_fit = None
     sgn_eps = max(sig_w, 1e-4 * scale, 1e-6)
+    lo_eps = hi_eps = sgn_eps
     if target == "tau_m" and "omega_m" in avail and "bias" not in excluded and any(
             _has_sgn(c.basis) for c in baseline_columns(target, avail, declared, extra_terms, 1.0, twin_params)[0]
             if c.term is None):
@@ -651,6 +660,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         omega_low=float(np.quantile(np.abs(sf["omega_m"][moving]), 0.1)) if moving.any() else scale,
         sgn_eps=sgn_eps, t_ref=float(np.median(sf["temperature"])) if "temperature" in sf else 25.0,
         orders=orders, declared=set(declared), excluded=excluded,
+        eps_range=(lo_eps, hi_eps) if eps_fit is not None else None,
         short_stroke={v: (float(np.median(sf[v])), float(np.ptp(sf[v]) / 2)) for v in ("theta_m", "theta_f")
                       if v in avail and v in excluded and np.ptp(sf[v]) > 0 and "omega_m" not in excluded},
     )
@@ -673,6 +683,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         j0 += M.shape[1]
         Xc_cols.append(M)
         groups.append((c, idx))
+        c.replace_idx = [j for j, bc in enumerate(cols) if bc.param in c.replaces]
     X_all = np.concatenate([Xb_all] + Xc_cols, 1) if Xc_cols else Xb_all
     gram = _BlockGram(X_all[fit], y[fit], ds.block[fit])
     base_idx = list(range(Xb_all.shape[1]))
@@ -681,13 +692,14 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
 
     def _shape_fit(gi, cur_idx, jackknife):
         cand, cix = groups[gi]
-        Xc = X_all[srows][:, cur_idx]
+        keep_c = [c for c in cur_idx if c not in cand.replace_idx]
+        Xc = X_all[srows][:, keep_c]
 
         def design(sh):
             return np.column_stack([Xc, basis_matrix(cand.make_basis(sh), s_rows)])
-        names = [f"c{j}" for j in cur_idx] + [f"g{j}" for j in cix]
+        names = [f"c{j}" for j in keep_c] + [f"g{j}" for j in cix]
         return fit_separable(y[srows], design, names, ds.block[srows], cand.shapes, jackknife=jackknife,
-                             positive=[len(cur_idx) + len(cix) - 1] if cand.positive else [])
+                             positive=[len(keep_c) + len(cix) - 1] if cand.positive else [])
 
     def _apply(gi, res):
         cand, cix = groups[gi]
@@ -713,7 +725,9 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             return confirmed[gi][1]
         res = _shape_fit(gi, cur_idx, jackknife=True)
         _apply(gi, res)
-        confirmed[gi] = (key, (all(res.identified.values()), "; ".join(res.notes)))
+        cand = groups[gi][0]
+        ok_ = all(v for k, v in res.identified.items() if k not in cand.nuisance)
+        confirmed[gi] = (key, (ok_, "; ".join(n for n in res.notes if n.split(":")[0] not in cand.nuisance)))
         return confirmed[gi][1]
 
     sel, trace = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm)
@@ -724,7 +738,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         cand, cix = groups[gi]
         if not cand.shapes:
             continue
-        others = base_idx + [c for gj in sel if gj != gi for c in groups[gj][1]]
+        others = _model(base_idx, groups, [gj for gj in sel if gj != gi])
         ok_, note = confirm(gi, others)
         if not ok_:
             sel.remove(gi)
@@ -732,19 +746,20 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                           "note": note})
             statements.append(f"{cand.name}: its shape is not identified in the final model ({note}); left out")
     while True:
-        idx = base_idx + [c for gi in sel for c in groups[gi][1]]
-        beta = _lstsq(X_all[fit][:, idx], y[fit])
-        refit_params = {c.param: float(b) for c, b in zip(cols, beta[: len(cols)])}
-        terms, pos = [], len(cols)
+        idx = _model(base_idx, groups, sel)
+        beta_full = np.zeros(X_all.shape[1])  # coefficients of every column, 0 for those not in the model
+        beta_full[idx] = _lstsq(X_all[fit][:, idx], y[fit])
+        beta = beta_full[idx]
+        refit_params = {c.param: float(b) for c, b in zip(cols, beta_full[: len(cols)])}
+        terms = []
         for gi in sel:
             cand, cix = groups[gi]
-            terms.append(cand.term(target, beta[pos : pos + len(cix)]))
-            pos += len(cix)
+            terms.append(cand.term(target, beta_full[cix]))
 
         # 5. held-out scoring (optional per-bag offset of theta_m estimated on a calibration part)
         score = heldout.copy()
         offsets: dict = {}
-        base_pred = Xb_all @ beta[: len(cols)]
+        base_pred = Xb_all @ beta_full[: len(cols)]
         periodic_m = [t for t in terms if t.get("variable") == "theta_m" and t.get("order") is not None]
         sig_eval = sig
         if opt.angle_offset == "estimate":
@@ -775,7 +790,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         sse_b = float(np.sum(r_before[score] ** 2))
         effects = []
         for t, gi in zip(terms, sel):
-            ix1 = base_idx + groups[gi][1]
+            ix1 = _model(base_idx, groups, [gi])
             b1 = _lstsq(X_all[fit][:, ix1], y[fit])
             sse1 = float(np.sum((y - X_eval[:, ix1] @ b1)[score] ** 2))
             effects.append({"name": t["name"], "variable": t["variable"], "order": t["order"], "form": t["form"],

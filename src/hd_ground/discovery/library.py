@@ -47,6 +47,8 @@ class Candidate:
     make_basis: Callable[[dict], list[dict]] | None = field(repr=False, default=None)
     short_stroke: bool = False  # a smooth term in an angle whose periodicity is not identifiable
     test_cols: tuple[int, ...] | None = None  # columns whose identification decides (None: all)
+    nuisance: tuple[str, ...] = ()  # shapes re-identified with the group whose identification does not decide
+    replaces: tuple[str, ...] = ()  # baseline parameters whose columns the group replaces (e.g. "T_C")
 
     def set_shape(self, shape: dict, sd: dict | None = None) -> None:
         """Fix the shape parameters (and record their SDs): rebuilds ``basis``."""
@@ -81,6 +83,7 @@ class LibraryContext:
     excluded: set[str] = field(default_factory=set)  # names/variables that cannot be identified on these data
     n_pole_pairs_hint: int | None = None
     short_stroke: dict[str, tuple[float, float]] = field(default_factory=dict)  # angle -> (centre, half range)
+    eps_range: tuple[float, float] | None = None  # rad/s, search range of the friction transition width
     windup_scale: float = 0.0  # rad, q90 of |w| (twist-side shape ranges)
     windup_noise: float = 0.0  # rad, white-noise sigma of w
     windup_dot_scale: float = 0.0  # rad/s, q90 of |w'|
@@ -152,11 +155,13 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
     sh0 = {"omega_s": float(np.sqrt(lo * hi)), "delta": 1.0, "eps": e0}
     out.append(Candidate(
         "stribeck_friction", "stribeck", "omega_m", None, stribeck_basis(sh0),
-        "dT_C tanh(omega_m/eps) + (T_S - T_C) exp(-(|omega_m|/omega_s)^delta) tanh(omega_m/eps)",
-        lambda c: {"dT_C": float(c[0]), "T_S_minus_T_C": float(c[1])},
+        "T_C tanh(omega_m/eps) + (T_S - T_C) exp(-(|omega_m|/omega_s)^delta) tanh(omega_m/eps)",
+        lambda c: {"T_C": float(c[0]), "T_S_minus_T_C": float(c[1])},
         requires=("omega_m",), nonlinear=dict(sh0), positive=True, test_cols=(1,),
         shapes=[Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.5, 2.5, log=False, n_grid=4),
-                Shape("eps", e0 / 5, e0 * 5, log=True, n_grid=6)],
+                Shape("eps", *ctx.eps_range, log=True, n_grid=8)] if ctx.eps_range else
+               [Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.5, 2.5, log=False, n_grid=4)],
+        nuisance=("eps",), replaces=("T_C",),
         make_basis=stribeck_basis,
     ))
     # Temperature-dependent friction: viscous and Coulomb coefficients drifting with T.
