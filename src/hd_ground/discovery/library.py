@@ -158,9 +158,9 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
         "T_C tanh(omega_m/eps) + (T_S - T_C) exp(-(|omega_m|/omega_s)^delta) tanh(omega_m/eps)",
         lambda c: {"T_C": float(c[0]), "T_S_minus_T_C": float(c[1])},
         requires=("omega_m",), nonlinear=dict(sh0), positive=True, test_cols=(1,),
-        shapes=[Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.5, 2.5, log=False, n_grid=4),
+        shapes=[Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5),
                 Shape("eps", *ctx.eps_range, log=True, n_grid=8)] if ctx.eps_range else
-               [Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.5, 2.5, log=False, n_grid=4)],
+               [Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5)],
         nuisance=("eps",), replaces=("T_C",),
         make_basis=stribeck_basis,
     ))
