@@ -331,8 +331,6 @@ def _plant2_param_errors(effect: str, rep: dict, g: dict, truth: dict) -> tuple[
 
 def run_world_case(world: str, effect: str | None, out: Path, *, duration: float, seed: int) -> dict:
     """One case: bags, discover (held out: the last bag), greedy on the same split; a result row."""
-    from hd_ground.discovery.pipeline import run_discovery
-
     out = Path(out)
     if world == "plant2":
         sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -348,9 +346,19 @@ def run_world_case(world: str, effect: str | None, out: Path, *, duration: float
         c = write_family_case(out / "bags", world, effect, params, n_missions=4, duration=duration, seed=seed)
         bags, truth = [str(b) for b in c["bags"]], None
         expect = (exp1,) if exp1 else ()
+    return evaluate_world_case(world, effect, bags, expect, truth, out / "discovery")
+
+
+def evaluate_world_case(world: str, effect: str | None, bags: list[str], expect: tuple, truth: dict | None,
+                        out: Path, signals: list[str] | None = None) -> dict:
+    """discover (held out: the last bag) and greedy on the same bags; ``expect``: (signal, name, variable,
+    order) findings; ``truth``: plant2's truth dict (parameter errors) or None (hd_sim: read from the bags)."""
+    from hd_ground.discovery.pipeline import run_discovery
+
+    bags = [str(b) for b in bags]
     sig = expect[0][0] if expect else "tau_m"
     t0 = time.perf_counter()
-    rep = run_discovery(bags, out / "discovery", heldout=[bags[-1]], plots=False, within_bag_check=False,
+    rep = run_discovery(bags, out, heldout=[bags[-1]], plots=False, within_bag_check=False, signals=signals,
                         log=lambda s: None)
     t_d = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -161,7 +161,9 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
         shapes=[Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5),
                 Shape("eps", *ctx.eps_range, log=True, n_grid=8)] if ctx.eps_range else
                [Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5)],
-        nuisance=("eps",), replaces=("T_C",),
+        # the curve decides: omega_s must be identified; the exponent trades off against omega_s on finite
+        # data (reported with its SD, or as a bound), the width is the baseline's, re-identified
+        nuisance=("eps", "delta"), replaces=("T_C",),
         make_basis=stribeck_basis,
     ))
     # Temperature-dependent friction: viscous and Coulomb coefficients drifting with T.
