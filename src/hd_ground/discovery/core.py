@@ -787,31 +787,38 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
 
         # explained: fraction of the held-out baseline residual variance the effect removes when it alone is
         # added to the baseline (refitted on the fit data); bounded above by 1
+        # contribution: what the effect removes from the held-out error of the final model (the model refitted
+        # without it, minus the full model), as a fraction of the baseline's held-out residual
         sse_b = float(np.sum(r_before[score] ** 2))
+        sse_full = float(np.sum(r_after[score] ** 2))
         effects = []
         for t, gi in zip(terms, sel):
             ix1 = _model(base_idx, groups, [gi])
             b1 = _lstsq(X_all[fit][:, ix1], y[fit])
             sse1 = float(np.sum((y - X_eval[:, ix1] @ b1)[score] ** 2))
+            ix0 = _model(base_idx, groups, [gj for gj in sel if gj != gi])
+            b0 = _lstsq(X_all[fit][:, ix0], y[fit])
+            sse0 = float(np.sum((y - X_eval[:, ix0] @ b0)[score] ** 2))
             effects.append({"name": t["name"], "variable": t["variable"], "order": t["order"], "form": t["form"],
                             "parameters": t["parameters"], "explained": (sse_b - sse1) / sse_b if sse_b > 0 else 0.0,
-                            "signal": target})
-        order = np.argsort([-e["explained"] for e in effects]) if effects else []
+                            "contribution": (sse0 - sse_full) / sse_b if sse_b > 0 else 0.0, "signal": target})
+        order = np.argsort([-e["contribution"] for e in effects]) if effects else []
         effects = [effects[i] for i in order]
         sel_sorted = [sel[i] for i in order]
-        # the held-out data decide: an effect whose held-out `explained` is not positive (after the offset
-        # step, where there is one) is not an effect; it leaves the model and the rest are refitted
-        bad = [gi for gi, e in zip(sel_sorted, effects) if e["explained"] <= 0]
+        # the held-out data decide: an effect whose removal from the final model does not raise the held-out
+        # error (after the offset step, where there is one) is not an effect; the least useful one leaves the
+        # model, the rest are refitted, and the test is repeated
+        bad = [(e["contribution"], gi, e) for gi, e in zip(sel_sorted, effects) if e["contribution"] <= 0]
         if not bad:
             break
-        for gi in bad:
-            cand = groups[gi][0]
-            ex = next(e["explained"] for g, e in zip(sel_sorted, effects) if g == gi)
-            trace.append({"step": "drop (no held-out gain)", "candidate": f"{cand.name}[{cand.family}]",
-                          "explained": ex})
-            statements.append(f"{cand.name} ({cand.variable}, order {cand.order}) lowered the cross-validated error "
-                              f"on the fit blocks but not the held-out error (explained {ex:+.1%}): not an effect")
-        sel = [gi for gi in sel if gi not in bad]
+        _, gi, e = min(bad, key=lambda b: b[0])
+        cand = groups[gi][0]
+        trace.append({"step": "drop (no held-out gain)", "candidate": f"{cand.name}[{cand.family}]",
+                      "explained": e["explained"], "contribution": e["contribution"]})
+        statements.append(f"{cand.name} ({cand.variable}, order {cand.order}) lowered the cross-validated error on the "
+                          f"fit blocks but not the held-out error (held-out contribution {e['contribution']:+.1%}, "
+                          f"alone {e['explained']:+.1%}): not an effect")
+        sel = [g for g in sel if g != gi]
     terms = [terms[i] for i in order]
     declared_after = list(declared)
     for e in effects:

@@ -142,7 +142,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
     # Stribeck: characteristic speed and shape exponent identified from the data (CV profile search), with
     # the Coulomb transition width re-identified jointly: a low-speed rise the baseline's width absorbed
     # (a steeper transition) is given back to the Stribeck term, not left for drag or bias terms
-    lo = max(ctx.omega_low * 0.3, 1e-3)
+    lo = max(ctx.omega_low * 0.05, 1e-3)
     hi = max(ctx.omega_scale * 0.6, lo * 2)
     e0 = ctx.sgn_eps
 
