@@ -19,6 +19,7 @@ from __future__ import annotations
 import io
 import os
 import struct
+import threading
 import zlib
 from dataclasses import dataclass, field
 from typing import BinaryIO, Iterator
@@ -116,29 +117,30 @@ def _compress(data: bytes, compression: str) -> bytes:
     raise ValueError(f"unsupported chunk compression {compression!r} (zstd, lz4 or none)")
 
 
-_ZC = None
-_ZD = None
+#: one zstd (de)compressor per thread: zstandard's objects are not thread-safe (two threads sharing one,
+#: e.g. a multi-threaded Dask worker reading two bags, get "Data corruption detected")
+_Z = threading.local()
 
 
 def _zstd_compressor():
-    global _ZC
-    if _ZC is None:
+    zc = getattr(_Z, "c", None)
+    if zc is None:
         import zstandard
 
-        _ZC = zstandard.ZstdCompressor(level=3)
-    return _ZC
+        zc = _Z.c = zstandard.ZstdCompressor(level=3)
+    return zc
 
 
 def _decompress(data: bytes, compression: str, size: int) -> bytes:
-    global _ZD
     if compression == "":
         return data
     if compression == "zstd":
-        if _ZD is None:
+        zd = getattr(_Z, "d", None)
+        if zd is None:
             import zstandard
 
-            _ZD = zstandard.ZstdDecompressor()
-        return _ZD.decompress(data, max_output_size=size)
+            zd = _Z.d = zstandard.ZstdDecompressor()
+        return zd.decompress(data, max_output_size=size)
     if compression == "lz4":
         import lz4.frame
 

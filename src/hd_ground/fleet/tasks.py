@@ -223,6 +223,9 @@ def mission_task(path: str, store_dir: str, calib: dict | None, opts: FleetOptio
     from hd_ground.fleet.store import FleetStore
 
     t0 = time.perf_counter()
+    delay = float(os.environ.get("HDPHM_FLEET_TASK_DELAY_S", "0") or 0)  # throttle (kill/resume tests)
+    if delay > 0:
+        time.sleep(min(delay, 60.0))
     st = FleetStore(store_dir)
     m = read_mission(path)
     aid, k = str(m.meta.actuator_id), int(m.meta.mission_index)
