@@ -148,7 +148,7 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
 
             bar = tqdm(total=len(futs) + len(act_futs), unit="task", desc="fleet", file=sys.stderr)
         n_stored = 0
-        task_s = 0.0
+        task_s = act_s = 0.0
         samples = nbytes = 0
         for f in as_completed(futs + act_futs):
             if bar:
@@ -158,6 +158,8 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
             except Exception as e:  # noqa: BLE001 - one bad bag must not stop the fleet
                 summary["errors"].append(f"{f.key}: {type(e).__name__}: {e}")
                 continue
+            if "missions" in r and "task_s" in r:  # an actuator task
+                act_s += r["task_s"]
             if r.get("stored"):
                 n_stored += 1
                 task_s += r.get("task_s", 0.0)
@@ -165,7 +167,7 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
                 nbytes += r.get("bytes", 0)
         if bar:
             bar.close()
-        summary.update(missions_stored=n_stored, mission_task_s=task_s, samples=samples, bag_bytes=nbytes)
+        summary.update(missions_stored=n_stored, mission_task_s=task_s, actuator_task_s=act_s, samples=samples, bag_bytes=nbytes)
     finally:
         if own:
             client.close()
