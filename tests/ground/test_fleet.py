@@ -38,6 +38,25 @@ def test_mission_task_commits_once_and_is_queryable(fleet_bags, tmp_path):
         st.query("SELECT nope FROM missions")
 
 
+def test_fleet_cli_status_and_query(fleet_bags, tmp_path, capsys):
+    from hd_ground.fleet.tasks import FleetOptions, calibrate_task, mission_task
+    from hdphm.cli import main
+
+    opts = FleetOptions(healthy_missions=1, onboard={"warmup_s": 1.0})
+    bags = [b for b in fleet_bags if "EMA-0001" in b]
+    cal = calibrate_task(bags[:1], opts)
+    for b in bags:
+        mission_task(b, str(tmp_path), cal, opts)
+    assert main(["fleet", "query", "--store", str(tmp_path), "--format", "csv",
+                 "SELECT actuator_id, count(*) AS n FROM missions GROUP BY 1"]) == 0
+    assert capsys.readouterr().out.splitlines() == ["actuator_id,n", f"EMA-0001,{len(bags)}"]
+    assert main(["fleet", "status", "--store", str(tmp_path)]) == 0  # no RUL / classes yet: shown as '-'
+    line = capsys.readouterr().out.splitlines()[1]
+    assert line.split()[:3] == ["EMA-0001", str(len(bags)), str(len(bags) - 1)]
+    assert main(["fleet", "status", "--store", str(tmp_path / "nothing")]) == 1  # clear error, not a traceback
+    assert "not a fleet store" in capsys.readouterr().err
+
+
 def test_write_mission_is_atomic_against_a_concurrent_duplicate(tmp_path):
     from hd_ground.fleet.store import FleetStore
 

@@ -29,7 +29,7 @@ def _ground_fleet(args: argparse.Namespace) -> int:
     opts = FleetOptions(healthy_missions=args.healthy_missions, model_dir=args.twin or "", onboard=onboard,
                         obs_model=args.obs_model or "", n_particles=args.particles, classifier=args.classifier or "",
                         seed=args.seed)
-    s = run_fleet(args.paths, args.store, args.scheduler, opts, progress=not args.quiet)
+    s = run_fleet(args.paths, args.store, args.scheduler, opts, progress=not args.quiet, refresh=args.refresh)
     for e in s["errors"]:
         print(f"error: {e}", file=sys.stderr)
     rate = s["missions_stored"] / s["wall_s"] if s["wall_s"] > 0 else float("nan")
@@ -141,6 +141,8 @@ def register(subparsers) -> None:
     p.add_argument("--particles", type=int, default=500, help="particles of the RUL filter (default 500)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--summary", default=None, metavar="JSON", help="write the run summary here")
+    p.add_argument("--refresh", action="store_true",
+                   help="recompute every actuator's RUL and fault classes (after changing --classifier / --obs-model)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_ground_fleet)
 

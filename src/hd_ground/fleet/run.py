@@ -83,8 +83,12 @@ def _stored_calibration(store: FleetStore, aid: str, ref_missions: list[int], op
 
 
 def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opts: FleetOptions | None = None,
-              progress: bool = True, log: Callable[[str], None] = print, client=None) -> dict[str, Any]:
-    """Analyse every bag not yet in the store; returns a summary (counts, errors, wall time)."""
+              progress: bool = True, log: Callable[[str], None] = print, client=None,
+              refresh: bool = False) -> dict[str, Any]:
+    """Analyse every bag not yet in the store; returns a summary (counts, errors, wall time).
+
+    ``refresh``: recompute every actuator's RUL history and fault classes even when none of its missions
+    is new (after changing the classifier or the observation model)."""
     from distributed import as_completed
 
     opts = opts or FleetOptions()
@@ -136,7 +140,7 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
             futs += mf
             rul = store.read_actuator_table(aid, "rul")
             n_all = len(stored | set(todo))
-            if todo or rul is None or not rul or rul[-1].get("n_missions") != n_all:
+            if refresh or todo or rul is None or not rul or rul[-1].get("n_missions") != n_all:
                 act_futs.append(client.submit(actuator_task, str(store.root), aid, calib, opts, *mf,
                                               key=f"actuator-{tok}-{aid}-{n_all}-{time.time_ns()}", retries=1))
         summary.update(actuators=len(by_act), missions_todo=n_todo, missions_skipped=n_skip)
