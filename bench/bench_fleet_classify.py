@@ -1,9 +1,11 @@
 """Fault classification across missions on held-out units of three plant families (``hdphm bench fleet_classify``).
 
-1. Simulates (once; cached under ``--root``, default ``bags/fleet_classify``) a training fleet of family A
-   (24 units, seed 11) and held-out fleets of families A (seed 21), B and C (seeds 22, 23; 9 units each):
-   3 s missions, faults (lubrication loss, flexspline stiffness loss) injected mid-life, tooth wear in all
-   (``bench/fleet_sim.py``).
+1. Simulates (once; cached under ``--root``, default ``bags/fleet_classify``) a training fleet of the default
+   plant A (24 units, seed 11) and held-out fleets (9 units each) of A (seed 21), of two local variants B
+   and C of it (seeds 22, 23) and of the three structurally different ``hd_sim.families`` smooth-cubic,
+   deadzone-lugre (500 Hz, N 50/80) and hysteretic-robot (N 160, 200 Hz-2 kHz, stamp jitter) (seeds
+   31-33): 3 s missions, faults (lubrication loss, flexspline stiffness loss) injected mid-life, tooth
+   wear in all (``bench/fleet_sim.py``).
 2. Runs the fleet analysis (``hd_ground.fleet.run.run_fleet``, the code of ``hdphm ground fleet``) on each
    into its own store (onboard warm-up 1 s: the missions are 3 s).
 3. Labels every mission after the reference from the simulator's truth (scoring only): the injected fault
@@ -17,7 +19,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -26,7 +27,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-FLEETS = (("train_A", "A", 11, 24), ("test_A", "A", 21, 9), ("test_B", "B", 22, 9), ("test_C", "C", 23, 9))
+FLEETS = (("train_A", "A", 11, 24), ("test_A", "A", 21, 9), ("test_B", "B", 22, 9), ("test_C", "C", 23, 9),
+          ("test_smooth-cubic", "smooth-cubic", 31, 9), ("test_deadzone-lugre", "deadzone-lugre", 32, 9),
+          ("test_hysteretic-robot", "hysteretic-robot", 33, 9))
 
 
 def labels_from_truth(truth: dict, min_severity: float = 0.15, wear_hi: float = 0.5, wear_lo: float = 0.3):
@@ -142,7 +145,7 @@ def main(argv=None) -> int:
     Xall = np.concatenate([data[n][0] for n, *_ in FLEETS[1:]])
     yall = sum((data[n][1] for n, *_ in FLEETS[1:]), [])
     for mname, m in (("gaussian", qda), ("nearest_centroid", nc)):
-        md, acc, mrec = confusion_md(yall, m.predict(Xall), f"**all held-out units, families A+B+C** ({mname}, {len(yall)} snapshots)")
+        md, acc, mrec = confusion_md(yall, m.predict(Xall), f"**all held-out units, all families** ({mname}, {len(yall)} snapshots)")
         print()
         print(md)
         print(f"\naccuracy {acc:.2f}, macro recall {mrec:.2f}")

@@ -1,7 +1,8 @@
 """Simulated fleets with faults injected mid-life, for the fleet classification study and benchmarks.
 
-Bench/test helper (imports hd_sim; estimators never import this). Three plant *families* differ in
-structure, not only in unit spread:
+Bench/test helper (imports hd_sim; estimators never import this). ``family`` is either a name of
+``hd_sim.families`` (``default``, ``smooth-cubic``, ``deadzone-lugre``, ``hysteretic-robot``: laws, gear
+ratio, sensors and log rate drawn per unit) or one of three local variants of the default plant:
 
 * ``A``: the simulator's realistic defaults;
 * ``B``: no Stribeck friction, no hysteresis, no position-dependent mesh stiffness, no cogging
@@ -38,7 +39,7 @@ def family_effects(family: str):
     if family == "C":
         return e.with_off("load_dependent_friction").with_params(
             **{"coulomb_friction.T_C": 1.8, "kinematic_error_harmonic.A2": 6.0e-5})
-    raise ValueError(f"unknown plant family {family!r} (A, B, C)")
+    raise ValueError(f"unknown plant variant {family!r} (A, B, C)")
 
 
 def _life(job):
@@ -66,7 +67,13 @@ def simulate_fault_fleet(out_dir, family: str = "A", n_units: int = 9, n_mission
     if truth_path.exists():
         return json.loads(truth_path.read_text())
     out.mkdir(parents=True, exist_ok=True)
-    base = family_effects(family)
+    fam_name = None
+    if family in ("A", "B", "C"):
+        base = family_effects(family)
+    else:  # a plant family of hd_sim.families (structurally different laws and sensors)
+        from hd_sim import EffectSet
+
+        base, fam_name = EffectSet.default(), family
     rng = np.random.default_rng([seed, 0xF1EE7])
     jobs, plans = [], {}
     for i, p in enumerate(sample_population(n_units, seed, id_prefix=id_prefix or f"{family}{seed}")):
@@ -76,7 +83,8 @@ def simulate_fault_fleet(out_dir, family: str = "A", n_units: int = 9, n_mission
         eff = base if fault == "none" else base.with_on(fault).with_params(
             **{f"{fault}.onset": float(onset), f"{fault}.rate": float(fault_rate)})
         plans[p["actuator_id"]] = {"fault": fault, "onset": onset if fault != "none" else None}
-        jobs.append((p, n_missions, str(out), eff, dict(duration=duration, seed=seed, sim_internal_every=0)))
+        jobs.append((p, n_missions, str(out), eff, dict(duration=duration, seed=seed, sim_internal_every=0,
+                                                        **({"family": fam_name} if fam_name else {}))))
     if workers > 1:
         import multiprocessing as mp
 
