@@ -10,7 +10,7 @@ ratio, sensors and log rate drawn per unit) or one of three local variants of th
 * ``C``: defaults without load-dependent (mesh sliding) friction, T_C x 1.2 and a stronger kinematic
   error (A2 x 1.5).
 
-A unit whose simulation diverges is left out (and said so): the plant, not the analysis, failed.
+A unit whose simulation diverges or whose drawn parameters the plant refuses is left out (and said so): the plant, not the analysis, failed.
 
 Each unit's life gets one of three fault plans: none (tooth wear only), lubrication loss, or
 flexspline stiffness loss, with onset drawn mid-life (missions ``onset_range``). ``fleet_truth.json``
@@ -48,10 +48,16 @@ def _life(job):
     import shutil
 
     p, n_missions, out, eff, kw = job
+    if kw.get("family"):  # an hd_sim plant family: its laws, gear ratio, sensors and log rate for this unit
+        from hd_sim.families import family_unit
+
+        kw = dict(kw)
+        u = family_unit(kw.pop("family"), p, base=eff, seed=kw["seed"])
+        p, eff, kw["fs"] = u.params, u.effects, u.fs
     try:
         return p["actuator_id"], simulate_life(p, n_missions, out, effects=eff, **kw)
-    except FloatingPointError as e:
-        print(f"unit {p['actuator_id']} left out: {e}", flush=True)
+    except (FloatingPointError, ValueError) as e:  # the plant cannot simulate this unit's draw
+        print(f"unit {p['actuator_id']} left out: {type(e).__name__}: {e}", flush=True)
         shutil.rmtree(Path(out) / p["actuator_id"], ignore_errors=True)
         return p["actuator_id"], None
 
