@@ -71,7 +71,7 @@ def main(argv=None) -> int:
     res = {}
     try:
         for nw in (1, 2):
-            with LocalCluster(n_workers=nw, threads_per_worker=1, dashboard_address=None, silence_logs=50) as cl, \
+            with LocalCluster(n_workers=nw, threads_per_worker=1, dashboard_address=":0", silence_logs=50) as cl, \
                     Client(cl) as c:
                 st = tmp / f"local{nw}"
                 s = run_fleet([str(bags)], str(st), opts=opts, client=c, **quiet)

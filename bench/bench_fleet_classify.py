@@ -116,7 +116,7 @@ def main(argv=None) -> int:
     # the stores' own classification columns use the package default classifier (if any); scored below is
     # the one trained here on train_A only
     opts = FleetOptions(healthy_missions=a.healthy_missions, onboard={"warmup_s": 1.0}, n_particles=200)
-    with LocalCluster(n_workers=a.workers, threads_per_worker=1, dashboard_address=None, silence_logs=50) as cl, \
+    with LocalCluster(n_workers=a.workers, threads_per_worker=1, dashboard_address=":0", silence_logs=50) as cl, \
             Client(cl) as client:
         for name, *_ in FLEETS:
             s = run_fleet([str(root / name)], str(root / f"store_{name}"), opts=opts, progress=False, client=client,

@@ -50,7 +50,7 @@ def test_loopback_equals_embedded_and_resume_after_kill(small_fleet_dir, loopbac
     assert (tmp_path / "clean" / "fleet.duckdb").is_file()
 
     # 2. the embedded cluster (in-process worker) on the same data: identical store contents
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None,
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0",
                       silence_logs=50) as cl, Client(cl) as c:
         s2 = run_fleet([str(small_fleet_dir)], str(tmp_path / "local"), opts=_opts(), progress=False, client=c,
                        log=lambda s: None)

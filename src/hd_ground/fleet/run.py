@@ -57,7 +57,7 @@ def make_client(scheduler: str = "local"):
             raise ValueError(f"--scheduler {scheduler!r}: expected local, local:N or tcp://HOST:PORT") from None
         if not 1 <= nw <= 1024:
             raise ValueError(f"--scheduler {scheduler!r}: worker count must be in 1..1024")
-        cluster = LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None,
+        cluster = LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=":0",
                                silence_logs=50)
         return Client(cluster), cluster
     if "://" not in scheduler:
