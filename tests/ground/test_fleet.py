@@ -57,6 +57,19 @@ def test_fleet_cli_status_and_query(fleet_bags, tmp_path, capsys):
     assert "not a fleet store" in capsys.readouterr().err
 
 
+def test_calibration_skips_an_unreadable_reference_bag(fleet_bags, tmp_path):
+    from hd_ground.fleet.tasks import FleetOptions, calibrate_task
+
+    bad = tmp_path / "broken.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    opts = FleetOptions(healthy_missions=2, onboard={"warmup_s": 1.0})
+    cal = calibrate_task([str(bad), [b for b in fleet_bags if "EMA-0002" in b][0]], opts)
+    assert cal["reference_missions"] == [0] and "Q_red" in cal["thresholds"]
+    assert len(cal["skipped"]) == 1 and "broken.mcap" in cal["skipped"][0]
+    none = calibrate_task([str(bad)], opts)
+    assert "no readable reference bag" in none["error"] and none["thresholds"] == {}
+
+
 def test_write_mission_is_atomic_against_a_concurrent_duplicate(tmp_path):
     from hd_ground.fleet.store import FleetStore
 

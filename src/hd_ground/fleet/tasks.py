@@ -90,11 +90,22 @@ def calibrate_task(paths: list[str], opts: FleetOptions) -> dict[str, Any]:
     from hd_twin import physics as ph
 
     t0 = time.perf_counter()
-    missions = [read_mission(p) for p in paths]
+    missions, skipped = [], []
+    for p in paths:  # an unreadable reference bag is skipped (and said so), not fatal for the actuator
+        try:
+            missions.append(read_mission(p))
+        except (ValueError, OSError) as e:
+            skipped.append(f"{p}: {e}")
     params = ph.TwinParams.from_yaml()
     out: dict[str, Any] = {"reference_bags": [str(p) for p in paths],
                            "reference_missions": [int(m.meta.mission_index) for m in missions],
-                           "actuator_id": str(missions[0].meta.actuator_id), "options": opts.to_dict()}
+                           "actuator_id": str(missions[0].meta.actuator_id) if missions else "",
+                           "options": opts.to_dict(), "skipped": skipped}
+    if not missions:  # no calibration: the missions run with the defaults and the onboard self-calibration
+        out["error"] = "no readable reference bag: " + "; ".join(skipped)
+        out["recalibration"] = {"skipped": out["error"]}
+        out["thresholds"], out["references"] = {}, {}
+        return json.loads(json.dumps(out, default=float))
     try:
         new, rep = recalibrate(missions, params)
         out["recalibration"] = rep
