@@ -28,7 +28,7 @@ def _ground_fleet(args: argparse.Namespace) -> int:
             return 2
     opts = FleetOptions(healthy_missions=args.healthy_missions, model_dir=args.twin or "", onboard=onboard,
                         obs_model=args.obs_model or "", n_particles=args.particles, classifier=args.classifier or "",
-                        seed=args.seed)
+                        seed=args.seed, discover=args.discover)
     s = run_fleet(args.paths, args.store, args.scheduler, opts, progress=not args.quiet, refresh=args.refresh)
     for e in s["errors"]:
         print(f"error: {e}", file=sys.stderr)
@@ -140,6 +140,9 @@ def register(subparsers) -> None:
     p.add_argument("--classifier", default=None, help="fault classifier JSON (default: the package's)")
     p.add_argument("--particles", type=int, default=500, help="particles of the RUL filter (default 500)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--discover", action="store_true",
+                   help="also run discovery (hdphm discover) once per actuator type (gear ratio) on the first "
+                        "reference mission of up to 4 of its actuators; ~10 s per type; stored under STORE/discovery")
     p.add_argument("--summary", default=None, metavar="JSON", help="write the run summary here")
     p.add_argument("--refresh", action="store_true",
                    help="recompute every actuator's RUL and fault classes (after changing --classifier / --obs-model)")

@@ -23,7 +23,8 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from hd_ground.fleet.store import FleetStore
-from hd_ground.fleet.tasks import FleetOptions, actuator_task, calibrate_task, mission_task, probe_task
+from hd_ground.fleet.tasks import (FleetOptions, actuator_task, calibrate_task, discover_task, mission_task,
+                                   probe_task)
 
 
 def expand_bags(specs: Iterable[str]) -> list[str]:
@@ -74,7 +75,9 @@ def _stored_calibration(store: FleetStore, aid: str, ref_missions: list[int], op
         return None
     r = rows[0]
     try:
-        if json.loads(r["reference_missions"]) != ref_missions or json.loads(r["options"]) != opts.to_dict():
+        keys = ("healthy_missions", "model_dir", "onboard")  # what the calibration depends on
+        old = json.loads(r["options"])
+        if json.loads(r["reference_missions"]) != ref_missions or any(old.get(k) != getattr(opts, k) for k in keys):
             return None
         return {k: json.loads(r[k]) for k in ("reference_missions", "params", "thresholds", "references",
                                                "recalibration", "options")}
@@ -110,6 +113,7 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
         summary["workers"] = len(client.scheduler_info().get("workers", {}))
         probes = client.gather(client.map(probe_task, paths, key=[f"probe-{i}-{hash(p)}" for i, p in enumerate(paths)]))
         by_act: dict[str, dict[int, str]] = defaultdict(dict)
+        ratio: dict[str, float] = {}
         for pr in probes:
             if "error" in pr:
                 summary["errors"].append(pr["error"])
@@ -121,6 +125,7 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
                                          f"mission {k}); ignored")
                 continue
             have[k] = pr["bag"]
+            ratio.setdefault(pr["actuator_id"], pr.get("gear_ratio", float("nan")))
         done = store.done_missions()
         tok = format(abs(hash(str(store.root))) % 16**8, "08x")  # task keys per store: a shared cluster never mixes runs
         futs, act_futs = [], []
@@ -143,7 +148,21 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
             if refresh or todo or rul is None or not rul or rul[-1].get("n_missions") != n_all:
                 act_futs.append(client.submit(actuator_task, str(store.root), aid, calib, opts, *mf,
                                               key=f"actuator-{tok}-{aid}-{n_all}-{time.time_ns()}", retries=1))
-        summary.update(actuators=len(by_act), missions_todo=n_todo, missions_skipped=n_skip)
+        disc_futs = []
+        if opts.discover:  # one discovery per actuator type (gear ratio), on reference missions, if not stored
+            types: dict[str, list[str]] = defaultdict(list)
+            for aid in sorted(by_act):
+                g = ratio.get(aid, float("nan"))
+                key = f"gear_ratio={g:g}" if g == g else "gear_ratio=unknown"
+                if len(types[key]) < opts.discover_units:
+                    types[key].append(by_act[aid][min(by_act[aid])])
+            for key, ps in types.items():
+                if not (store.root / "discovery" / key).is_dir():
+                    disc_futs.append(client.submit(discover_task, ps, str(store.root), key, opts,
+                                                   key=f"discover-{tok}-{key}"))
+        act_futs += disc_futs
+        summary.update(actuators=len(by_act), missions_todo=n_todo, missions_skipped=n_skip,
+                       discovery_types=len(disc_futs))
         log(f"fleet: {len(paths)} bags, {len(by_act)} actuators, {n_todo} missions to analyse, {n_skip} already "
             f"stored, on {summary['workers']} worker(s) ({scheduler})")
         bar = None
@@ -164,7 +183,7 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
                 continue
             if "missions" in r and "task_s" in r:  # an actuator task
                 act_s += r["task_s"]
-            if r.get("stored"):
+            if r.get("stored") and "mission_index" in r:
                 n_stored += 1
                 task_s += r.get("task_s", 0.0)
                 samples += r.get("samples", 0)

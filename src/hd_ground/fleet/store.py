@@ -6,6 +6,7 @@ Layout under the store directory ``S``::
         missions.parquet  features.parquet  residual_stats.parquet  events.parquet
     S/actuators/actuator_id=<A>/                      per-actuator results, each file replaced atomically
         calibration.parquet  rul.parquet  classification.parquet  events.parquet
+    S/discovery/<type>/report.json, events.parquet   discovery per actuator type (``--discover``)
     S/fleet.duckdb                                    views over the files (absolute paths), for DuckDB / BI tools
     S/_tmp/                                           half-written missions (ignored; safe to delete)
 
@@ -205,7 +206,8 @@ class FleetStore:
     def _globs(self) -> dict[str, list[str]]:
         r = self.root.as_posix()
         g = {t: [f"{r}/data/*/*/{t}.parquet"] for t in ("missions", "features", "residual_stats")}
-        g["events"] = [f"{r}/data/*/*/events.parquet", f"{r}/actuators/*/events.parquet"]
+        g["events"] = [f"{r}/data/*/*/events.parquet", f"{r}/actuators/*/events.parquet",
+                       f"{r}/discovery/*/events.parquet"]
         for t in ("rul", "classification", "calibration"):
             g[t] = [f"{r}/actuators/*/{t}.parquet"]
         return g

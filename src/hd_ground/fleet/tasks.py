@@ -46,6 +46,8 @@ class FleetOptions:
     n_particles: int = 500  # RUL particle filter
     classifier: str = ""  # fault classifier JSON ("" the package default, if present)
     seed: int = 0
+    discover: bool = False  # also run discovery once per actuator type (gear ratio) on reference missions
+    discover_units: int = 4  # actuators per type whose first reference mission discovery uses
 
     def onboard_config(self):
         from hd_onboard.core import OnboardConfig
@@ -77,7 +79,7 @@ def probe_task(path: str) -> dict[str, Any]:
         if rec is None:
             return {"bag": str(path), "error": f"{path}: no hd_mission metadata record (see CONTRACT.md)"}
         return {"bag": str(path), "actuator_id": str(rec["actuator_id"]), "mission_index": int(rec["mission_index"]),
-                "bytes": os.path.getsize(path)}
+                "gear_ratio": _f(rec.get("gear_ratio")), "bytes": os.path.getsize(path)}
     except (KeyError, ValueError, OSError) as e:
         return {"bag": str(path), "error": f"{path}: {type(e).__name__}: {e}"}
 
@@ -250,6 +252,46 @@ def mission_task(path: str, store_dir: str, calib: dict | None, opts: FleetOptio
     return {"bag": str(path), "actuator_id": aid, "mission_index": k, "stored": stored,
             "max_level": tables["missions"][0]["max_level"], "task_s": time.perf_counter() - t0,
             "samples": int(m.n), "bytes": int(os.path.getsize(path))}
+
+
+def discover_task(paths: list[str], store_dir: str, type_key: str, opts: FleetOptions) -> dict[str, Any]:
+    """Discovery (:func:`hd_ground.discovery.pipeline.run_discovery`) for one actuator type on reference
+    missions of several of its actuators; the report goes to ``STORE/discovery/<type_key>/`` (atomic rename)
+    with one ``events`` row per effect found (``kind`` = discovery)."""
+    import shutil
+    import uuid
+    from pathlib import Path
+
+    from hd_ground.discovery.pipeline import run_discovery
+    from hd_ground.fleet.store import FleetStore, _table
+
+    import pyarrow.parquet as pq
+
+    t0 = time.perf_counter()
+    st = FleetStore(store_dir)
+    final = st.root / "discovery" / type_key
+    if final.is_dir():
+        return {"type": type_key, "stored": False}
+    tmp = st.root / "_tmp" / f"disc-{os.getpid()}-{uuid.uuid4().hex}"
+    try:
+        rep = run_discovery(list(paths), tmp, twin_dir=opts.model_dir or None, plots=False, log=lambda s: None)
+        ev = [{"actuator_id": type_key, "mission_index": -1, "t_s": math.nan, "kind": "discovery",
+               "name": str(e.get("name", e.get("effect", "?"))), "level": 1 if e.get("confirmed", True) else 0,
+               "value": _f(e.get("explained")), "detail": json.dumps(e, default=str)}
+              for e in rep.get("effects", [])]
+        from hd_ground.fleet.store import EVENT_SCHEMA
+
+        pq.write_table(_table(ev, EVENT_SCHEMA), tmp / "events.parquet")
+        final.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.rename(tmp, final)
+        except OSError:
+            if not final.is_dir():
+                raise
+        return {"type": type_key, "stored": True, "effects": len(ev), "task_s": time.perf_counter() - t0}
+    finally:
+        if Path(tmp).exists():
+            shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _actuator_data(store, actuator_id: str):
