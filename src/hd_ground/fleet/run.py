@@ -111,7 +111,11 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
     summary: dict[str, Any] = {"bags": len(paths), "store": str(store.root), "scheduler": scheduler, "errors": []}
     try:
         summary["workers"] = len(client.scheduler_info().get("workers", {}))
-        probes = client.gather(client.map(probe_task, paths, key=[f"probe-{i}-{hash(p)}" for i, p in enumerate(paths)]))
+        probes = []
+        for i in range(0, len(paths), 5000):  # batches: a bounded number of futures on the client
+            batch = paths[i: i + 5000]
+            probes += client.gather(client.map(probe_task, batch, key=[f"probe-{i + j}-{hash(p)}"
+                                                                       for j, p in enumerate(batch)]))
         by_act: dict[str, dict[int, str]] = defaultdict(dict)
         ratio: dict[str, float] = {}
         for pr in probes:
@@ -128,27 +132,21 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
             ratio.setdefault(pr["actuator_id"], pr.get("gear_ratio", float("nan")))
         done = store.done_missions()
         tok = format(abs(hash(str(store.root))) % 16**8, "08x")  # task keys per store: a shared cluster never mixes runs
-        futs, act_futs = [], []
+        # plan (cheap, client side): per actuator the missions to run and whether its results are stale
+        plans = []
         n_todo = n_skip = 0
         for aid in sorted(by_act):
             ms = dict(sorted(by_act[aid].items()))
-            ref_idx = list(ms)[: opts.healthy_missions]
-            calib = _stored_calibration(store, aid, ref_idx, opts)
-            if calib is None:
-                calib = client.submit(calibrate_task, [ms[k] for k in ref_idx], opts, key=f"calibrate-{tok}-{aid}-{hash(tuple(ref_idx))}")
             stored = done.get(aid, set())
             todo = [k for k in ms if k not in stored]
             n_skip += len(ms) - len(todo)
             n_todo += len(todo)
-            mf = [client.submit(mission_task, ms[k], str(store.root), calib, opts, key=f"mission-{tok}-{aid}-{k}",
-                                retries=2) for k in todo]
-            futs += mf
             rul = store.read_actuator_table(aid, "rul")
             n_all = len(stored | set(todo))
-            if refresh or todo or rul is None or not rul or rul[-1].get("n_missions") != n_all:
-                act_futs.append(client.submit(actuator_task, str(store.root), aid, calib, opts, *mf,
-                                              key=f"actuator-{tok}-{aid}-{n_all}-{time.time_ns()}", retries=1))
-        disc_futs = []
+            need_act = bool(refresh or todo or not rul or rul[-1].get("n_missions") != n_all)
+            if todo or need_act:
+                plans.append((aid, ms, todo, need_act, n_all))
+        disc = []
         if opts.discover:  # one discovery per actuator type (gear ratio), on reference missions, if not stored
             types: dict[str, list[str]] = defaultdict(list)
             for aid in sorted(by_act):
@@ -156,24 +154,59 @@ def run_fleet(bags: Iterable[str], store_dir: str, scheduler: str = "local", opt
                 key = f"gear_ratio={g:g}" if g == g else "gear_ratio=unknown"
                 if len(types[key]) < opts.discover_units:
                     types[key].append(by_act[aid][min(by_act[aid])])
-            for key, ps in types.items():
-                if not (store.root / "discovery" / key).is_dir():
-                    disc_futs.append(client.submit(discover_task, ps, str(store.root), key, opts,
-                                                   key=f"discover-{tok}-{key}"))
-        act_futs += disc_futs
-        summary.update(actuators=len(by_act), missions_todo=n_todo, missions_skipped=n_skip,
-                       discovery_types=len(disc_futs))
+            disc = [(key, ps) for key, ps in types.items() if not (store.root / "discovery" / key).is_dir()]
+        n_tasks = n_todo + sum(p[3] for p in plans) + len(disc)
+        summary.update(actuators=len(by_act), missions_todo=n_todo, missions_skipped=n_skip, discovery_types=len(disc))
         log(f"fleet: {len(paths)} bags, {len(by_act)} actuators, {n_todo} missions to analyse, {n_skip} already "
             f"stored, on {summary['workers']} worker(s) ({scheduler})")
+
+        def submissions():
+            """Tasks submitted lazily, actuator after actuator, so the client holds a bounded window of
+            futures (an actuator's mission futures until its actuator task is submitted), not one per task."""
+            for key, ps in disc:
+                yield client.submit(discover_task, ps, str(store.root), key, opts, key=f"discover-{tok}-{key}")
+            for aid, ms, todo, need_act, n_all in plans:
+                ref_idx = list(ms)[: opts.healthy_missions]
+                calib = _stored_calibration(store, aid, ref_idx, opts)
+                if calib is None:
+                    calib = client.submit(calibrate_task, [ms[k] for k in ref_idx], opts,
+                                          key=f"calibrate-{tok}-{aid}-{hash(tuple(ref_idx))}")
+                mf = []
+                for k in todo:
+                    f = client.submit(mission_task, ms[k], str(store.root), calib, opts, key=f"mission-{tok}-{aid}-{k}",
+                                      retries=2)
+                    mf.append(f)
+                    yield f
+                if need_act:
+                    yield client.submit(actuator_task, str(store.root), aid, calib, opts, *mf,
+                                        key=f"actuator-{tok}-{aid}-{n_all}-{time.time_ns()}", retries=1)
+
         bar = None
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=len(futs) + len(act_futs), unit="task", desc="fleet", file=sys.stderr)
+            bar = tqdm(total=n_tasks, unit="task", desc="fleet", file=sys.stderr)
+        window = max(64, 8 * max(summary["workers"], 1))
+        gen = submissions()
+        ac = as_completed()
+        pending = 0
+
+        def fill() -> None:
+            nonlocal pending
+            while pending < window:
+                f = next(gen, None)
+                if f is None:
+                    return
+                ac.add(f)
+                pending += 1
+
+        fill()
         n_stored = 0
         task_s = act_s = 0.0
         samples = nbytes = 0
-        for f in as_completed(futs + act_futs):
+        for f in ac:
+            pending -= 1
+            fill()
             if bar:
                 bar.update(1)
             try:
