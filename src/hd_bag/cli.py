@@ -61,11 +61,14 @@ def _validate(args) -> int:
         print("no bags found", file=sys.stderr)
         return 2
     n_bad = 0
+    failed: set[str] = set()
     for b in bags:
         vs = validate_bag(b)
         errs = [v for v in vs if v.severity == "error"]
         fail = bool(errs) or (args.strict and vs)
         n_bad += bool(fail)
+        if fail:
+            failed.add(b)
         shown: dict[tuple, int] = {}
         hidden: dict[tuple, int] = {}
         for v in vs:
@@ -82,9 +85,35 @@ def _validate(args) -> int:
             print(f"{b} {topic}: {sev}: ... {k} more samples: {problem}")
         if not fail and not args.quiet:
             print(f"{b}: OK ({len(vs)} warnings)" if vs else f"{b}: OK")
+    if len(bags) > 1:  # across bags: hours per actuator never decrease, mission indices do not repeat
+        seq = _mission_sequence(bags)
+        for v in seq:
+            print(v)
+        n_bad += len({v.file for v in seq} - failed)
     if len(bags) > 1 and not args.quiet:
-        print(f"{len(bags) - n_bad}/{len(bags)} bags pass")
+        print(f"{max(len(bags) - n_bad, 0)}/{len(bags)} bags pass")
     return 1 if n_bad else 0
+
+
+def _mission_sequence(bags: list[str]):
+    """check_mission_sequence over the bags whose hd_mission metadata parses."""
+    import math
+    from types import SimpleNamespace
+
+    from hd_bag import BagError, read_metadata
+    from hd_bag.reader import check_mission_sequence
+
+    metas = []
+    for b in bags:
+        try:
+            md = read_metadata(b).get("hd_mission") or {}
+            m = SimpleNamespace(actuator_id=md["actuator_id"], mission_index=int(md["mission_index"]),
+                                operating_hours=float(md["operating_hours"]))
+        except (BagError, ValueError, KeyError, OSError):
+            continue  # the per-bag validation already reported it
+        if math.isfinite(m.operating_hours):
+            metas.append((b, m))
+    return check_mission_sequence(metas)
 
 
 def _split_kv(s: str, what: str) -> tuple[str, str]:
