@@ -103,6 +103,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.n_runs = 0
             self._lock = threading.Lock()
             self.create_timer(0.2, self._deliver)
+            ru.contain_callbacks(self, "hdphm/ground")  # no exception of a callback stops the node
             if self.p["run_on_start"] and self.p["archive_dir"]:
                 self.start()
 

@@ -41,6 +41,8 @@ PARAMS: dict[str, Any] = {
     "actuator_id": "",  # hardware_id until /hd/mission says otherwise ("" -> header.frame_id or "unknown")
     "gear_ratio": 0.0,  # N; 0 -> from /hd/mission or the twin parameters
     "model_dir": "",  # trained twin (ONNX); "" -> physics-only stand-in
+    # directories a twin state's model_dir may lie in (os.pathsep-separated; + parent of model_dir, $HDPHM_MODEL_ROOTS)
+    "model_roots": "",
     "diag_period_s": 0.5,  # s of sample time between periodic /diagnostics
     "stale_timeout_s": 2.0,  # s
     "max_block": 2000,  # samples per core call
@@ -161,7 +163,9 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.create_timer(max(0.1, self.p["stale_timeout_s"] / 4), self._on_timer)
             self._new_core()
             self.get_logger().info(f"onboard up: twin={self.core.expected.kind} {self.core.expected.version}")
+            ru.contain_callbacks(self, "hdphm/onboard")  # no exception of a callback stops the node
             if self._rt is not None:
+                ru.contain_callbacks(self._rt_node, "hdphm/onboard")
                 self._rt.start()
 
         def _rt_spin(self):
@@ -285,7 +289,15 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
 
         def _on_twin_impl(self, msg):
             try:
-                st = ru.parse_json_msg(msg, ru.TOPIC_TWIN_STATE)
+                from hd_twin import state as sv
+
+                st = sv.parse_json(msg.data, ru.TOPIC_TWIN_STATE, sv.MAX_STATE_BYTES)
+                if st.get("model_dir"):  # an ONNX file is loaded from it: only inside the model roots
+                    sv.check_model_dir(st["model_dir"], sv.model_roots(self.p.get("model_roots", ""), self.p["model_dir"]),
+                                       f"{ru.TOPIC_TWIN_STATE} model_dir")
+                for k in ("thresholds", "references"):
+                    if st.get(k) is not None:
+                        sv.check_per_actuator(st[k], f"{ru.TOPIC_TWIN_STATE} {k}")
                 params = ph.TwinParams.from_dict(st.get("params", {}), where=ru.TOPIC_TWIN_STATE) if st.get("params") else self.twin_params
                 ths = {}
                 for act, chans in (st.get("thresholds") or {}).items():

@@ -166,6 +166,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.mission_sub_qos())
             self.create_timer(float(self.p["publish_period_s"]), self._on_timer)
             self._dirty = False
+            ru.contain_callbacks(self, "hdphm/prognostic")  # no exception of a callback stops the node
 
         def _tracker(self, act: str) -> ActuatorTracker:
             if act not in self.trackers:
