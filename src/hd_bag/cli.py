@@ -35,6 +35,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="BAG_OR_DIR")
     p.set_defaults(func=_import_csv)
 
+    p = sub.add_parser("bag", help="bag file tools (recover: finalise a recording cut short)")
+    bsub = p.add_subparsers(dest="bag_command", metavar="BAGCOMMAND")
+    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+    pr = bsub.add_parser("recover", help="finalised copy of an MCAP without summary/footer (recorder killed)",
+                         description="Copy every complete chunk of an MCAP file that ends without its summary and "
+                                     "footer (a recorder killed by SIGKILL or a power cut) into a new, finalised "
+                                     "file that any MCAP reader opens. Damaged records are skipped and reported.")
+    pr.add_argument("bag", metavar="BAG")
+    pr.add_argument("--out", default=None, help="output file (default: BAG with .recovered.mcap)")
+    pr.set_defaults(func=_recover)
+
     p = sub.add_parser("inspect", help="topics, counts, rates, duration, metadata and read report of a bag")
     p.add_argument("bags", nargs="+", metavar="BAG")
     p.set_defaults(func=_inspect)
@@ -93,6 +104,24 @@ def _validate(args) -> int:
     if len(bags) > 1 and not args.quiet:
         print(f"{max(len(bags) - n_bad, 0)}/{len(bags)} bags pass")
     return 1 if n_bad else 0
+
+
+def _recover(args) -> int:
+    import os
+
+    from hd_bag.mcapio import McapFormatError, recover_mcap
+
+    out = args.out or (os.path.splitext(args.bag)[0] + ".recovered.mcap")
+    try:
+        r = recover_mcap(args.bag, out)
+    except (McapFormatError, ValueError, OSError) as e:
+        print(f"hdphm bag recover: {args.bag}: {e}", file=sys.stderr)
+        return 2
+    for i in r["issues"]:
+        print(f"{args.bag}: {i}", file=sys.stderr)
+    print(f"{args.bag} -> {out}: {r['messages']} messages in {r['chunks']} chunks"
+          + (" (the input was already complete)" if r["complete_before"] else ""))
+    return 0
 
 
 def _mission_sequence(bags: list[str]):

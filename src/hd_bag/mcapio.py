@@ -377,6 +377,7 @@ class MessageBlock:
     log_time: np.ndarray  # uint64
     start: np.ndarray  # int64
     length: np.ndarray  # int64
+    loose: bool = False  # messages found outside chunks (``buf`` holds payloads only, no records)
 
 
 @dataclass
@@ -629,7 +630,7 @@ def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_fi
             ln = np.array([len(p) for _, _, p in loose], np.int64)
             st = np.concatenate([[0], np.cumsum(ln)[:-1]]).astype(np.int64)
             blk = MessageBlock(np.frombuffer(buf, np.uint8), np.array([c for c, _, _ in loose], np.uint16),
-                               np.array([t for _, t, _ in loose], np.uint64), st, ln)
+                               np.array([t for _, t, _ in loose], np.uint64), st, ln, True)
             loose.clear()
             return blk
 
@@ -827,3 +828,65 @@ def gather_rows(block: MessageBlock, sel: np.ndarray, width: int) -> np.ndarray:
 
 __all__ = ["McapFileWriter", "McapFormatError", "McapScan", "MessageBlock", "scan_mcap", "message_records",
            "payloads", "gather_rows", "io"]
+
+
+def recover_mcap(src: str | os.PathLike, dst: str | os.PathLike, compression: str = "zstd") -> dict:
+    """Write a finalised copy of an MCAP file that lacks its summary/footer (a recorder killed with
+    SIGKILL, a power cut): every complete chunk and loose message before the cut, with the schemas,
+    channels and metadata met before it, then DataEnd, summary and footer, so any MCAP reader
+    (``mcap.reader.make_reader``, ``ros2 bag``) opens it. Damaged records in the data section are
+    skipped as :func:`scan_mcap` does. Returns counts and the scan's issues. ``dst`` must differ from
+    ``src``."""
+    src, dst = os.fspath(src), os.fspath(dst)
+    if os.path.abspath(src) == os.path.abspath(dst):
+        raise ValueError(f"{dst}: recovery writes a new file; give another output path")
+    scan = McapScan()
+    w = None
+    n_msgs = n_chunks = 0
+    seen_s: set[int] = set()
+    seen_c: set[int] = set()
+    seen_m: set[str] = set()
+
+    def sync():
+        nonlocal w
+        if w is None:
+            w = McapFileWriter(dst, profile=scan.profile or "ros2", library=(scan.library or "") + " (recovered)",
+                               compression=compression)
+        for sid, s in scan.schemas.items():
+            if sid not in seen_s:
+                w.add_schema(sid, s.name, s.encoding, s.data)
+                seen_s.add(sid)
+        for cid, c in scan.channels.items():
+            if cid not in seen_c:
+                w.add_channel(cid, c.schema_id, c.topic, c.message_encoding, c.metadata)
+                seen_c.add(cid)
+        for name, md in scan.metadata.items():
+            if name not in seen_m:
+                w.add_metadata(name, md)
+                seen_m.add(name)
+
+    try:
+        for blk in scan_mcap(src, scan):
+            sync()
+            blocks = []
+            for cid in np.unique(blk.channel).tolist():
+                sel = np.flatnonzero(blk.channel == cid)
+                st = blk.start[sel] - MSG_FIXED - 9
+                en = blk.start[sel] + blk.length[sel]
+                buf = blk.buf
+                if blk.loose:  # messages outside chunks: rebuild their records
+                    recs = [_record(OP_MESSAGE, struct.pack("<HIQQ", cid, 0, int(t), int(t)) + buf[s:s + n].tobytes())
+                            for s, n, t in zip(blk.start[sel].tolist(), blk.length[sel].tolist(),
+                                               blk.log_time[sel].tolist())]
+                else:
+                    recs = [buf[a:b].tobytes() for a, b in zip(st.tolist(), en.tolist())]
+                blocks.append((cid, blk.log_time[sel], recs))
+                n_msgs += len(sel)
+            w.write_chunk(blocks)
+            n_chunks += 1
+        sync()
+    finally:
+        if w is not None:
+            w.close()
+    return {"messages": n_msgs, "chunks": n_chunks, "complete_before": scan.complete,
+            "issues": [i.problem for i in scan.issues]}

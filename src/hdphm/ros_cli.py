@@ -876,6 +876,26 @@ def _pop_domain(args) -> None:
     args.ros_args = tail
 
 
+def _stop_on_signals() -> dict:
+    """SIGINT and SIGTERM set ``stop["v"]`` (Python handlers, installed after rclpy's): the spin loops below
+    poll it every 0.1 s, so a node, the stack or the recorder stops promptly on Ctrl-C or SIGTERM (rclpy's
+    own handler left a node without timers, the twin, blocked in its wait set)."""
+    stop = {"v": False, "sig": None}
+
+    def on_sig(signum, _frame):
+        stop["v"] = True
+        stop["sig"] = signum
+
+    signal.signal(signal.SIGINT, on_sig)
+    signal.signal(signal.SIGTERM, on_sig)
+    return stop
+
+
+def _spin_until_stopped(ex, stop: dict, end: float | None = None) -> None:
+    while not stop["v"] and (end is None or time.monotonic() < end):
+        ex.spin_once(timeout_sec=0.1)
+
+
 def cmd_node(args) -> int:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -893,8 +913,9 @@ def cmd_node(args) -> int:
     node = make_node(args.name, ctx)
     ex = ru.make_executor(ctx)
     ex.add_node(node)
+    stop = _stop_on_signals()
     try:
-        ex.spin()
+        _spin_until_stopped(ex, stop)
     except KeyboardInterrupt:
         pass
     finally:
@@ -917,8 +938,9 @@ def cmd_stack(args) -> int:
     st = Stack(args.domain_id, record=args.record, args=argv)
     print(f"hdphm stack: nodes {', '.join(st.nodes)} in one process (domain {args.domain_id or os.environ.get('ROS_DOMAIN_ID', 0)}); Ctrl-C stops",
           file=sys.stderr)
+    stop = _stop_on_signals()
     try:
-        st.ex.spin()
+        _spin_until_stopped(st.ex, stop)
     except KeyboardInterrupt:
         pass
     finally:
@@ -935,9 +957,24 @@ def cmd_replay(args) -> int:
     ctx = ru.init_context(args.domain_id)
     node = Node("hdphm_replay", context=ctx)
     rep = Replayer(node, rate)
+    # every expected reader (e.g. the stack and a recorder: --wait-for 2) on every contract topic and on
+    # /hd/mission before the first sample: starting when the first one matched cost a recorder 0.5 s
+    want = max(int(args.wait_for), 1)
+    pubs = list(rep.pubs.values()) + [rep.pub_mission]
     deadline = time.monotonic() + args.wait_s
-    while time.monotonic() < deadline and rep.pubs[ru.TOPIC_JOINT_STATES].get_subscription_count() == 0:
+    while time.monotonic() < deadline and min(p.get_subscription_count() for p in pubs) < want:
         time.sleep(0.05)
+    have = min(p.get_subscription_count() for p in pubs)
+    if have < want:
+        print(f"hdphm replay: only {have} of {want} expected subscribers on every topic after {args.wait_s:g} s "
+              f"({', '.join(f'{p.topic_name} {p.get_subscription_count()}' for p in pubs)})"
+              + ("; not replaying (--wait-for)" if args.wait_for else "; replaying anyway"), file=sys.stderr)
+        if args.wait_for:
+            node.destroy_node()
+            import rclpy
+
+            rclpy.try_shutdown(context=ctx)
+            return 2
     t0 = time.perf_counter()
     try:
         for b in args.bags:
@@ -945,8 +982,8 @@ def cmd_replay(args) -> int:
             print(f"{b}: " + ", ".join(f"{k} {v}" for k, v in c.items()), file=sys.stderr)
         for p in rep.pubs.values():
             p.wait_for_all_acked()
-    except ValueError as e:
-        print(f"hdphm replay: {e}", file=sys.stderr)
+    except (ValueError, OSError) as e:  # a bad bag: one line naming the file, no traceback
+        print(f"hdphm replay: {str(e).splitlines()[0] if str(e) else type(e).__name__}", file=sys.stderr)
         return 2
     finally:
         wall = time.perf_counter() - t0
@@ -959,7 +996,7 @@ def cmd_replay(args) -> int:
     return 0
 
 
-def _drain(ex, rec, quiet_spins: int = 3, max_s: float = 10.0) -> None:
+def _drain(ex, rec, quiet_spins: int = 3, max_s: float = 1.0) -> None:
     """On stop: file what the middleware already delivered to the recorder's readers (keep spinning
     until ``quiet_spins`` spins in a row record nothing, at most ``max_s``), so a SIGTERM loses no
     message that arrived before it."""
@@ -991,12 +1028,7 @@ def cmd_record(args) -> int:
         return 2
     ex = ru.make_executor(ctx)
     ex.add_node(node)
-    stop = {"v": False}
-
-    def on_term(*_):
-        stop["v"] = True
-
-    signal.signal(signal.SIGTERM, on_term)
+    stop = _stop_on_signals()  # SIGINT too: rclpy's handler shut the context down before the drain
     end = time.monotonic() + args.duration if args.duration else None
     try:
         while not stop["v"] and (end is None or time.monotonic() < end):
@@ -1062,7 +1094,11 @@ def register(sub) -> None:
     p.add_argument("bags", nargs="+")
     p.add_argument("--rate", default="1.0", help="1.0 = real time, 'max' = as fast as the subscribers take it")
     p.add_argument("--domain-id", type=int, default=None)
-    p.add_argument("--wait-s", type=float, default=5.0, help="wait this long for a subscriber before starting")
+    p.add_argument("--wait-s", type=float, default=5.0, help="wait this long for the subscribers before starting")
+    p.add_argument("--wait-for", type=int, default=0, metavar="N",
+                   help="start only when N subscribers (e.g. 2: the stack and a recorder) match every contract "
+                        "topic and /hd/mission; exit 2 if they do not within --wait-s (0: wait for one, then "
+                        "start anyway)")
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("record", help="record /hd/..., /diagnostics and stack topics to MCAP")

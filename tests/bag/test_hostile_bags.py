@@ -251,3 +251,34 @@ def test_scan_of_random_garbage_after_magic_never_raises_anything_but_format_err
                 pass
         except McapFormatError:
             pass
+
+
+# ---- finding 8 (file side): a recording cut short opens in plain MCAP readers after `hdphm bag recover` --
+def test_killed_recording_recovers_for_plain_mcap_readers(tmp_path, mission, capsys):
+    from mcap.reader import make_reader
+
+    from hdphm.cli import main
+
+    p = good_bag(tmp_path / "full.mcap", mission, chunk_seconds=0.25)
+    d = open(p, "rb").read()
+    chunks = [o for o, op, _ in records(d) if op == OP_CHUNK]
+    cut = tmp_path / "killed.mcap"
+    cut.write_bytes(d[:chunks[-1] + 50])  # as SIGKILL leaves it: no summary, the last chunk half written
+    with pytest.raises(Exception):
+        with open(cut, "rb") as f:
+            list(make_reader(f).iter_messages())
+    assert main(["bag", "recover", str(cut), "--out", str(tmp_path / "rec.mcap")]) == 0
+    assert "messages in" in capsys.readouterr().out
+    with open(tmp_path / "rec.mcap", "rb") as f:
+        got = list(make_reader(f).iter_messages())
+    with open(p, "rb") as f:
+        full = list(make_reader(f).iter_messages())
+    assert 0 < len(got) < len(full)
+    m_rec, m_full = read_mission(tmp_path / "rec.mcap"), read_mission(p)
+    np.testing.assert_array_equal(m_rec.tau_m, m_full.tau_m[:m_rec.n])
+    assert m_rec.meta == m_full.meta
+    # an unchunked recording recovers too
+    u, _ = unchunked_bag(tmp_path / "u.mcap", mission)
+    assert main(["bag", "recover", u, "--out", str(tmp_path / "u2.mcap")]) == 0
+    with open(tmp_path / "u2.mcap", "rb") as f:
+        assert len(list(make_reader(f).iter_messages())) == mission.n
