@@ -87,7 +87,7 @@ def apply_update(state: dict, upd: dict, source: str = "update", model_roots: li
     try:
         upd = sv.check_update(upd, model_roots, source)
     except sv.UpdateError as e:
-        raise ValueError(f"{source}: {e}") from None
+        raise sv.refusal(source, e) from None
     new = json.loads(json.dumps(state))
     if "params" in upd:
         if not isinstance(upd["params"], dict):
@@ -98,7 +98,7 @@ def apply_update(state: dict, upd: dict, source: str = "update", model_roots: li
         try:
             sv.check_merged_params(new["params"])
         except sv.UpdateError as e:
-            raise ValueError(f"{source}: {e}") from None
+            raise sv.refusal(source, e) from None
     if "thresholds" in upd:
         if not isinstance(upd["thresholds"], dict):
             raise ValueError(f"{source}: thresholds must be a mapping actuator -> channel -> values")

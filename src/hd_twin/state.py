@@ -290,6 +290,13 @@ def check_update(upd: Any, roots: list[str], where: str = "update") -> dict:
     return out
 
 
+def refusal(source: str, e: UpdateError) -> ValueError:
+    """``e`` with ``source`` in front of its message, keeping its field."""
+    r = ValueError(f"{source}: {e}")
+    r.field = e.field
+    return r
+
+
 def summary_of_refusal(e: Exception, data: str, wall_time: float) -> dict:
     """A short, bounded record of a refused update (kept in the node's refusal memory)."""
     import hashlib

@@ -954,6 +954,16 @@ def cmd_replay(args) -> int:
     from hdphm import rosutil as ru
 
     rate = "max" if args.rate == "max" else float(args.rate)
+    for b in args.bags:  # a bag that cannot be opened fails before any waiting or publishing: one line
+        try:
+            from hd_bag import read_metadata
+
+            read_metadata(b)
+            next(iter(BagSource(b).blocks()), None)
+        except (ValueError, OSError) as e:
+            line = str(e).splitlines()[0] if str(e) else type(e).__name__
+            print(f"hdphm replay: {line if line.startswith(str(b)) else f'{b}: {line}'}", file=sys.stderr)
+            return 2
     ctx = ru.init_context(args.domain_id)
     node = Node("hdphm_replay", context=ctx)
     rep = Replayer(node, rate)
@@ -996,7 +1006,7 @@ def cmd_replay(args) -> int:
     return 0
 
 
-def _drain(ex, rec, quiet_spins: int = 3, max_s: float = 1.0) -> None:
+def _drain(ex, rec, quiet_spins: int = 3, max_s: float = 0.5) -> None:
     """On stop: file what the middleware already delivered to the recorder's readers (keep spinning
     until ``quiet_spins`` spins in a row record nothing, at most ``max_s``), so a SIGTERM loses no
     message that arrived before it."""
@@ -1036,10 +1046,14 @@ def cmd_record(args) -> int:
     except KeyboardInterrupt:
         pass
     finally:
+        t_stop = time.monotonic()
         _drain(ex, rec)
         rec.close()
+        t_closed = time.monotonic()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
+    print(f"stopped: drained and closed in {t_closed - t_stop:.2f} s, shut down in {time.monotonic() - t_closed:.2f} s",
+          file=sys.stderr)
     print(f"recorded {sum(rec.counts.values())} messages to {len(rec.files)} file(s) under {args.out}: "
           + ", ".join(f"{k} {v}" for k, v in rec.counts.items() if v), file=sys.stderr)
     return 0
@@ -1082,13 +1096,13 @@ def register(sub) -> None:
                    help="run the process SCHED_FIFO at this priority (middleware receive threads included; "
                         "worker threads stay normal); needs CAP_SYS_NICE; 0: normal scheduling")
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args -p name:=value ...")
-    p.set_defaults(func=cmd_node)
+    p.set_defaults(func=cmd_node, fast_exit=True)
 
     p = sub.add_parser("stack", help="run all four nodes in one process")
     p.add_argument("--domain-id", type=int, default=None)
     p.add_argument("--record", default=None, help="also record to this MCAP file")
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args -p onboard.param:=value ...")
-    p.set_defaults(func=cmd_stack)
+    p.set_defaults(func=cmd_stack, fast_exit=True)
 
     p = sub.add_parser("replay", help="publish bags on the contract topics with their original stamps")
     p.add_argument("bags", nargs="+")
@@ -1108,4 +1122,4 @@ def register(sub) -> None:
     p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: until Ctrl-C/SIGTERM)")
     p.add_argument("--split-per-mission", action="store_true",
                    help="--out is a directory; one contract bag per /hd/mission (default: one stack log file)")
-    p.set_defaults(func=cmd_record)
+    p.set_defaults(func=cmd_record, fast_exit=True)
