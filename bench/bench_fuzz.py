@@ -141,9 +141,9 @@ def _random_json(rng: np.random.Generator, depth: int = 0):
     if k == 1:
         return bool(rng.integers(0, 2))
     if k == 2:
-        return float(rng.choice([0.0, -1.0, 1e308, 1e-320, rng.normal() * 10 ** rng.integers(-5, 6)]))
+        return float(rng.choice([0.0, -1.0, 1e308, 1e-320, rng.normal() * 10.0 ** int(rng.integers(-5, 6))]))
     if k == 3:
-        return int(rng.choice([0, 1, -1, 101, 2**63, -(2**70)]))
+        return [0, 1, -1, 101, 2**63, -(2**70)][int(rng.integers(0, 6))]
     if k == 4:
         return "x" * int(rng.choice([0, 1, 10, 300, 5000]))
     if k == 5:
@@ -207,6 +207,7 @@ def main(argv: list[str] | None = None) -> int:
             p.write_bytes(_mutate(seeds[name], rng))
             stats["tried"] += 1
             _bag_case(str(p), stats, a.trace, peaks, f"{name} case {i}")
+        rss_bags = _rss_mb()
         hostile = _hostile(d)
         rss_h0 = _rss_mb()
         hs = {"tried": 0, "refused": 0, "recovered": 0, "unclean": 0, "examples": []}
@@ -241,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{t_bags:.1f} s")
     print("| input | cases tried | refused cleanly | recovered (read with a report) | unclean | memory ceiling |")
     print("|---|---:|---:|---:|---:|---|")
-    mem = f"peak RSS {_rss_mb():.0f} MB (after seeds {rss0:.0f} MB)"
+    mem = f"peak RSS {rss_bags:.0f} MB (after building the seeds {rss0:.0f} MB)"
     if peaks:
         mem += f"; largest tracemalloc peak per case {max(peaks):.1f} MB"
     print(f"| mutated bags | {stats['tried']} | {stats['refused']} | {stats['recovered']} | {stats['unclean']} | {mem} |")

@@ -48,9 +48,9 @@ MSG_FIXED = 2 + 4 + 8 + 8
 #: Caps on every size read from a file (see docs/ROBUSTNESS.md "Caps"). They follow from the
 #: contract: the largest chunk a known writer produces is a few MiB (ours: 0.5 MiB or 1 s of log
 #: time, i.e. ~3 MiB at 20 kHz; the recorder: 20,000 messages; ``ros2 bag``: 768 KiB; ``mcap``:
-#: 1 MiB), so a chunk that decompresses to more than 128 MiB is not a contract bag, it is a
-#: decompression bomb or corrupt length bytes.
-MAX_CHUNK_BYTES = 128 << 20
+#: 1 MiB), so a chunk that decompresses to more than 64 MiB (20x the largest of them) is not a
+#: contract bag, it is a decompression bomb or corrupt length bytes.
+MAX_CHUNK_BYTES = 64 << 20
 #: Schema / Channel / Metadata / Header records: texts of a few KiB (JointState's schema with its
 #: dependencies: 0.5 KiB); 4 MiB leaves room for any real message definition.
 MAX_META_RECORD = 4 << 20

@@ -73,8 +73,9 @@ def one_message_bag(path, payload: bytes, meta: dict[str, str], schema_name: str
 
 def huge_jointstate(n: int) -> bytes:
     """A JointState whose position array holds ``n`` zeros (compresses to almost nothing)."""
-    lay = cdr.jointstate_layout(["motor", "output"], counts=(n, 0, 0))
-    return lay.template.tobytes()
+    body = bytearray(8) + struct.pack("<I", 1) + b"\x00" + bytes(3)  # stamp, frame_id "", pad to 16
+    body += struct.pack("<II", 0, n)  # no names, n positions (offset 24: aligned to 8)
+    return cdr.ENCAP_LE + bytes(body) + bytes(8 * n) + struct.pack("<II", 0, 0)
 
 
 def good_bag(path, m, **kw) -> str:
