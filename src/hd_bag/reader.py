@@ -9,11 +9,13 @@ checked against ``../shared/CONTRACT.md``:
 What is *fatal* (``read_mission`` raises :class:`BagError`; ``validate_bag``
 reports an error):
   not an MCAP file; corrupt bytes (CRC mismatch, undecodable chunk, impossible
-  record); no ``/hd/joint_states`` (or fewer than 2 usable samples); a contract
+  record); a size beyond its cap (``mcapio.MAX_CHUNK_BYTES`` declared or decompressed,
+  record lengths); no ``/hd/joint_states`` (or fewer than 2 usable samples); a contract
   topic with the wrong message type or encoding; JointState without the
   ``motor``/``output`` joints; missing ``hd_mission`` metadata, a missing
   required key, an unparsable or absurd value (gear ratio <= 0, k_t <= 0,
-  non-finite numbers, unknown source or contract version); grossly
+  non-finite numbers, operating hours above 1e6 h, an ``actuator_id`` that is not a
+  safe file name, unknown source or contract version); grossly
   non-monotonic stamps (a backward jump of more than 50 sample periods, more
   than 10 % of samples out of order, or most stamps repeated: the stamp clock
   is broken, re-sorting would invent a history); more than 1 % of a signal
@@ -21,6 +23,11 @@ reports an error):
 
 What the reader *repairs and reports* (``Mission.report``; validate: warning
 unless noted): a truncated file (complete chunks recovered; validate: error),
+a damaged record header in the data section (linear resync on the next valid
+record; an index record lost: warning, a chunk lost: error), a damaged
+summary or footer (the data section is complete: warning), messages above
+:data:`MAX_MESSAGE_BYTES` (not decoded; validate: error), bags or chunks
+without a CRC (warning; isolated bit-flip spikes read as NaN, validate: error),
 slightly out-of-order samples (re-sorted), duplicate stamps (first kept),
 dropouts (``report.gaps``, ``Mission.segment`` split at gaps > 10 samples,
 never interpolated), NaN (kept), isolated values beyond physical limits (set to
@@ -37,7 +44,12 @@ mistakes do: ``theta_f - theta_m / N`` beyond ``MAX_TWIST_OFFSET`` (encoders
 without a common zero), speeds that are not the derivative of the angles
 (``SPEED_SCALE_BAND``: rpm, deg/s, reversed sign), ``Q_red`` anti-correlated
 with the wind-up (torque sensor sign; validate: warning, the contract page does
-not state that sign).
+not state that sign), a ``gear_ratio`` the encoders contradict (slope of
+theta_m on theta_f beyond :data:`GEAR_RATIO_TOLERANCE`: the metadata has no CRC).
+
+Nothing a file names is imported or executed: contract types are decoded with
+this package's fixed schemas (``cdr.SCHEMAS``), :func:`iter_messages` maps type
+names through a fixed table and yields other types as :class:`RawMessage`.
 """
 
 from __future__ import annotations
