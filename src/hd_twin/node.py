@@ -123,6 +123,10 @@ def apply_update(state: dict, upd: dict, source: str = "update", model_roots: li
             new[k] = str(upd[k])
     new["revision"] = int(state.get("revision", 0)) + 1
     new["updated_by"] = str(upd.get("updated_by", source))[:sv.MAX_TEXT]
+    size = len(json.dumps(new))
+    if size > sv.MAX_STATE_BYTES // 2:  # merged thresholds/references grow per actuator: bound the whole state
+        raise ValueError(f"{source}: the state would grow to {size} bytes, above the cap of {sv.MAX_STATE_BYTES // 2} "
+                         "(hd_twin.state.MAX_STATE_BYTES / 2)")
     new["history"] = (state.get("history", []) + [{"revision": new["revision"], "by": new["updated_by"], "keys": sorted(upd),
                                                      "wall_time": time.time()}])[-20:]
     return new

@@ -79,3 +79,11 @@ def test_message_class_imports_only_from_the_fixed_package_table(tmp_path, monke
             ru.message_class(bad)
     assert not marker.exists()
     assert ru.message_class("std_msgs/msg/String").__name__ == "String"
+
+
+def test_state_growth_by_many_updates_is_bounded(state0):
+    """Merged per-actuator entries grow the state update after update: the merged state is capped."""
+    big = dict(state0, normalisation={"x": ["y" * 2000] * 4500})  # 9 MB already merged
+    with pytest.raises(ValueError, match="state would grow"):
+        apply_update(big, {"updated_by": "u"}, "u", [])
+    assert apply_update(state0, {"updated_by": "u"}, "u", [])["revision"] == 1
