@@ -554,20 +554,20 @@ def _resync(f, start: int, size: int) -> int | None:
 
     if start >= size:
         return None
+    window = 1 << 24  # search 16 MiB at a time: memory stays bounded whatever the file size
     with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
-        arr = np.frombuffer(mm, np.uint8)
-        try:
-            cand = np.flatnonzero((arr[start:] >= 0x01) & (arr[start:] <= 0x0F)) + start
-            for p in cand.tolist():
+        for w0 in range(start, size, window):
+            arr = np.frombuffer(mm, np.uint8, count=min(window, size - w0), offset=w0)
+            cand = (np.flatnonzero((arr >= 0x01) & (arr <= 0x0F)) + w0).tolist()
+            del arr
+            for p in cand:
                 if not _plausible_header(mm, p, size):
                     continue
                 ln = struct.unpack_from("<Q", mm, p + 1)[0]
                 q = p + 9 + ln
                 if q == size or (mm[p] == OP_FOOTER and q + 8 == size) or _plausible_header(mm, q, size):
                     return p
-            return None
-        finally:
-            del arr
+    return None
 
 
 def _cap_for(op: int) -> int:
