@@ -17,7 +17,7 @@ from hd_bag.mcapio import (MAX_CHUNK_BYTES, OP_CHUNK, OP_DATA_END, OP_MESSAGE_IN
 from hd_bag.reader import RawMessage
 
 from .conftest import make_mission
-from .hostile import good_bag, huge_jointstate, meta_dict, one_message_bag, records, unchunked_bag
+from .hostile import good_bag, huge_jointstate, js_payloads, meta_dict, one_message_bag, records, unchunked_bag
 
 
 def errors(vs):
@@ -69,7 +69,7 @@ def test_schema_name_never_imports_a_module(tmp_path, mission, monkeypatch):
     (pkg / "msg.py").write_text(f"open({str(marker)!r}, 'w').write('ran')\nclass JointState: pass\n")
     monkeypatch.chdir(tmp_path)
     monkeypatch.syspath_prepend(str(tmp_path))
-    _, rows = __import__("tests.bag.hostile", fromlist=["js_payloads"]).js_payloads(mission)
+    _, rows = js_payloads(mission)
     p = one_message_bag(tmp_path / "evil.mcap", rows[0].tobytes(), meta_dict(mission),
                         schema_name="evilpkg/msg/JointState")
     got = list(iter_messages(p))
