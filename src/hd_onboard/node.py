@@ -211,8 +211,9 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
 
         def _on_mission_impl(self, msg):
             try:
-                meta = ru.parse_json_msg(msg, ru.TOPIC_MISSION)
-                float(meta.get("gear_ratio", "nan"))
+                from hd_twin.state import check_mission
+
+                meta = check_mission(ru.parse_json_msg(msg, ru.TOPIC_MISSION), ru.TOPIC_MISSION)
             except (ValueError, TypeError) as e:
                 self._error(f"{ru.TOPIC_MISSION}: {e}")
                 return

@@ -175,7 +175,9 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
 
         def _on_mission(self, msg):
             try:
-                meta = ru.parse_json_msg(msg, ru.TOPIC_MISSION)
+                from hd_twin.state import check_mission
+
+                meta = check_mission(ru.parse_json_msg(msg, ru.TOPIC_MISSION), ru.TOPIC_MISSION)
             except ValueError as e:
                 self.get_logger().error(str(e))
                 return

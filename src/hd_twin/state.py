@@ -290,6 +290,36 @@ def check_update(upd: Any, roots: list[str], where: str = "update") -> dict:
     return out
 
 
+#: /hd/mission values checked when present: (low, high, low inclusive)
+_MISSION_NUMBERS = {"gear_ratio": (0.0, 10_000.0, False), "torque_constant": (0.0, 100.0, False),
+                    "operating_hours": (0.0, 1e6, True), "mission_index": (0.0, 1e7, True)}
+
+
+def check_mission(meta: dict, where: str = "/hd/mission") -> dict:
+    """A ``/hd/mission`` document (the bag's ``hd_mission`` record as JSON, values usually strings):
+    ``actuator_id`` a safe identifier, the numeric keys numbers (or numeric strings, not bool) that are
+    finite and plausible (as ``hd_bag.writer.check_meta``). Returns ``meta``; UpdateError naming the key."""
+    mapping(meta, where)
+    if "actuator_id" in meta:
+        if not isinstance(meta["actuator_id"], (str, int)) or isinstance(meta["actuator_id"], bool):
+            raise UpdateError(f"{where} actuator_id", f"must be a string, got {_short(meta['actuator_id'])}")
+        identifier(str(meta["actuator_id"]), f"{where} actuator_id")
+    for k, (lo, hi, incl) in _MISSION_NUMBERS.items():
+        if k not in meta:
+            continue
+        v = meta[k]
+        f = f"{where} {k}"
+        if isinstance(v, str):
+            try:
+                v = float(v.strip()[:64])
+            except ValueError:
+                raise UpdateError(f, f"{_short(meta[k])} is not a number") from None
+        x = number(v, f, lo, hi)
+        if not incl and x <= lo:
+            raise UpdateError(f, f"{x!r} must be > {lo:g}")
+    return meta
+
+
 def refusal(source: str, e: UpdateError) -> ValueError:
     """``e`` with ``source`` in front of its message, keeping its field."""
     r = ValueError(f"{source}: {e}")

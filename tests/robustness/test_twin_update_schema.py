@@ -87,3 +87,21 @@ def test_state_growth_by_many_updates_is_bounded(state0):
     with pytest.raises(ValueError, match="state would grow"):
         apply_update(big, {"updated_by": "u"}, "u", [])
     assert apply_update(state0, {"updated_by": "u"}, "u", [])["revision"] == 1
+
+
+@pytest.mark.parametrize("meta,match", [({"gear_ratio": True}, "gear_ratio"), ({"gear_ratio": "nan"}, "gear_ratio"),
+                                        ({"actuator_id": "../../x"}, "actuator_id"), ({"operating_hours": "1e300"}, "hours"),
+                                        ({"mission_index": [1]}, "mission_index"), ({"gear_ratio": "0"}, "> 0")])
+def test_mission_documents_are_checked(meta, match):
+    with pytest.raises(ValueError, match=match):
+        sv.check_mission(meta)
+
+
+def test_replayed_mission_documents_pass(tmp_path):
+    from hd_bag import read_metadata, write_mission
+
+    from tests.bag.conftest import make_mission
+
+    p = write_mission(tmp_path / "m.mcap", make_mission())
+    meta = dict(read_metadata(p)["hd_mission"], bag=str(p))
+    assert sv.check_mission(meta) is meta

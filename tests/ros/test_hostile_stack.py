@@ -90,6 +90,13 @@ def test_every_hostile_update_leaves_all_four_stack_nodes_answering(domain_id):
         for bad in ('{"thresholds": {"A": 5}}', '{"model_dir": "/etc"}', '{"params": {"N": "x"}}', "[" * 100_000):
             c.pub_state.publish(String(data=bad))
             c.spin(0.2)
+        # and hostile mission documents reach the onboard and prognostic nodes
+        pub_m = c.node.create_publisher(String, ru.TOPIC_MISSION, ru.qos("latched"))
+        for bad in ('{"gear_ratio": true}', '{"actuator_id": {"a": 1}}', '{"gear_ratio": "1e999"}',
+                    '{"actuator_id": "../../etc", "mission_index": "x"}', "{" * 50_000):
+            pub_m.publish(String(data=bad))
+            c.spin(0.2)
+        assert proc.poll() is None
         c.pub.publish(String(data='{"updated_by": "after-the-attack"}'))
         assert c.spin(20, lambda: c.states[-1].get("updated_by") == "after-the-attack"), c.states[-1]
         st = c.states[-1]
