@@ -80,6 +80,11 @@ def test_life_through_stack_onnx_twin_obs_model_split_recording(fleet, tmp_path,
         assert a.n == b.n and a.meta.mission_index == b.meta.mission_index
         np.testing.assert_array_equal(a.tau_m, b.tau_m)
     assert sum(s["recorded"].values()) >= sum(s["published"].values())
+    # the shipped Foxglove layout names only topics and fields (and table columns) these recordings hold
+    from hdphm.foxglove import check_layout, layout_paths, load_layout
+
+    assert len(layout_paths(load_layout())) >= 15
+    assert check_layout(files[-1]) == []
 
 
 def test_healthy_then_faulted_sim_bags_flags_only_after_onset(fleet, tmp_path, domain_id):
