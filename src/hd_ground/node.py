@@ -28,6 +28,8 @@ from hdphm import rosutil as ru
 
 NODE_NAME = "ground"
 TOPIC_TRIGGER = "/hd/ground/trigger"
+#: std_srvs/Trigger service: start a ground analysis, answered at once (started / busy / no archive)
+SERVICE_ANALYSE = "/hd/ground/analyse"
 PARAMS: dict[str, Any] = {
     "archive_dir": "",  # "" -> idle until configured
     "healthy_missions": 3,
@@ -85,6 +87,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
+    from std_srvs.srv import Trigger
 
     from hd_onboard.node import declare
 
@@ -97,6 +100,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.pub_update = self.create_publisher(String, ru.TOPIC_TWIN_UPDATE, ru.qos("latched"))
             self.pub_report = self.create_publisher(String, ru.TOPIC_GROUND_REPORT, ru.qos("latched"))
             self.create_subscription(String, TOPIC_TRIGGER, lambda m: self.start(), ru.qos("stream"))
+            self.create_service(Trigger, SERVICE_ANALYSE, self._on_analyse)
             self.result: tuple[dict, dict] | None = None
             self.error: str | None = None
             self.busy = False
@@ -106,15 +110,20 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             if self.p["run_on_start"] and self.p["archive_dir"]:
                 self.start()
 
-        def start(self):
+        def start(self) -> tuple[bool, str]:
             if not self.p["archive_dir"]:
                 self.get_logger().warning("ground: no archive_dir parameter; nothing to analyse")
-                return
+                return False, "no archive_dir parameter: nothing to analyse"
             with self._lock:
                 if self.busy:
-                    return
+                    return False, "an analysis is already running"
                 self.busy = True
             threading.Thread(target=self._work, daemon=True).start()
+            return True, f"analysis of {self.p['archive_dir']} started (results on {ru.TOPIC_GROUND_REPORT})"
+
+        def _on_analyse(self, request, response):
+            response.success, response.message = self.start()
+            return response
 
         def _work(self):
             t0 = time.time()
