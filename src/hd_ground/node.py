@@ -83,20 +83,25 @@ def analyse_archive(archive_dir: str, healthy_missions: int = 3, do_recal: bool 
     return update, report
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
-    from rclpy.node import Node
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
     from std_srvs.srv import Trigger
 
     from hd_onboard.node import declare
 
-    class GroundNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class GroundNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
+            self.n_runs = 0
+
+        def configure(self):
             self.pub_update = self.create_publisher(String, ru.TOPIC_TWIN_UPDATE, ru.qos("latched"))
             self.pub_report = self.create_publisher(String, ru.TOPIC_GROUND_REPORT, ru.qos("latched"))
             self.create_subscription(String, TOPIC_TRIGGER, lambda m: self.start(), ru.qos("stream"))
@@ -104,9 +109,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.result: tuple[dict, dict] | None = None
             self.error: str | None = None
             self.busy = False
-            self.n_runs = 0
             self._lock = threading.Lock()
             self.create_timer(0.2, self._deliver)
+
+        def activate(self):
             if self.p["run_on_start"] and self.p["archive_dir"]:
                 self.start()
 
@@ -150,4 +156,4 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                                    f"for {len(upd.get('references', {}))}"
                                    + (" and recalibrated parameters" if "params" in upd else ""))
 
-    return GroundNode()
+    return bring_up(GroundNode(), autostart)

@@ -128,26 +128,32 @@ def validate_references(refs, source: str = "update") -> dict:
     return out
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.node import Node
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
 
     from hd_onboard.node import declare, diag_status
 
-    class TwinNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class TwinNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
+
+        def configure(self):
             self.state = initial_state(self.p["model_dir"], self.p["params_file"])
             self.pub = self.create_publisher(String, ru.TOPIC_TWIN_STATE, ru.qos("latched"))
             self.pub_diag = self.create_publisher(DiagnosticArray, ru.TOPIC_DIAGNOSTICS, ru.qos("diagnostics"))
             self.create_subscription(String, ru.TOPIC_TWIN_UPDATE, self._on_update, ru.qos("latched"))
             self.n_updates = self.n_refused = 0
             self._seen: set[str] = set()
+
+        def activate(self):
             self._publish()
 
         def _publish(self):
@@ -178,4 +184,4 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.get_logger().info(f"twin revision {self.state['revision']} by {self.state['updated_by']}")
             self._publish()
 
-    return TwinNode()
+    return bring_up(TwinNode(), autostart)
