@@ -323,7 +323,8 @@ def _life_figure(av: ActuatorView, alpha: float = 0.2):
 
     rh = av.rul_history or {}
     hh = av.health_history
-    fig = make_subplots(rows=1, cols=2, subplot_titles=("health indicator over life", "RUL over life"))
+    fig = make_subplots(rows=1, cols=2, subplot_titles=("health indicator and estimated state over life", "RUL over life"),
+                        specs=[[{"secondary_y": True}, {}]])
     t = [_finite(x) for x in rh.get("t") or []]
     z = [_finite(x) for x in rh.get("z") or []]
     if t and z:
@@ -331,11 +332,13 @@ def _life_figure(av: ActuatorView, alpha: float = 0.2):
     if rh.get("state_mean"):
         sm = rh["state_mean"]
         col0 = [(_finite(r[0]) if isinstance(r, list) else _finite(r)) for r in sm]
-        fig.add_trace(go.Scatter(x=t, y=col0, mode="lines", name="filtered state (mean)"), 1, 1)
+        fig.add_trace(go.Scatter(x=t, y=col0, mode="lines", name="filtered state (mean, right axis)"), 1, 1,
+                      secondary_y=True)
     if hh:
         x = [_finite(r.get("mission_index")) for r in hh]
         y = [_finite(r.get("h_mean")) for r in hh]
-        fig.add_trace(go.Scatter(x=x, y=y, mode="lines", name="node: h_mean", line={"dash": "dot"}), 1, 1)
+        fig.add_trace(go.Scatter(x=x, y=y, mode="lines", name="node: h_mean (right axis)", line={"dash": "dot"}), 1, 1,
+                      secondary_y=True)
     rt = [_finite(x) for x in rh.get("rul_t") or []]
     if rt:
         p5 = [_finite(x) for x in rh.get("p5") or []]
@@ -357,7 +360,8 @@ def _life_figure(av: ActuatorView, alpha: float = 0.2):
                                          line={"color": "gray", "dash": "dash"}, showlegend=False), 1, 2)
     unit = rh.get("time_unit") or "missions"
     fig.update_xaxes(title_text=f"time ({unit})")
-    fig.update_yaxes(title_text="health indicator", row=1, col=1)
+    fig.update_yaxes(title_text="health indicator", row=1, col=1, secondary_y=False)
+    fig.update_yaxes(title_text="state", row=1, col=1, secondary_y=True)
     fig.update_yaxes(title_text=f"RUL ({unit})", row=1, col=2)
     fig.update_layout(height=380, margin={"l": 50, "r": 20, "t": 40, "b": 40}, legend={"orientation": "h"})
     return fig
