@@ -91,8 +91,9 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
-    """Build the onboard node (rclpy Node subclass instance)."""
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
+    """Build the onboard node (a managed node, configured and activated unless ``autostart`` is False)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
     from rclpy.parameter import Parameter
@@ -104,12 +105,18 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
     from hd_onboard.expected import make_expected
     from hd_twin import physics as ph
 
-    class OnboardNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class OnboardNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
+            self._rt = None
+            self._pool = None
+
+        def configure(self):
             self.cfg = OnboardConfig(**{k: self.p[k] for k in OnboardConfig.__dataclass_fields__ if k in self.p}).validate()
             self.twin_params = ph.TwinParams.from_yaml()
             self.twin_state: dict = {}
@@ -183,6 +190,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                     return
 
         def _on_js_locked(self, first):
+            if not self.is_active:  # the joint-state thread's own node is not gated by the lifecycle
+                return
             with self._lock:
                 self._on_js(first)
 
@@ -562,17 +571,18 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self._submit_windows(final=True)
             self._drain_windows(wait=True)
 
-        def destroy_node(self):
+        def release(self):
             if self._rt is not None:
                 self._rt_stop.set()
                 self._rt.join(timeout=2.0)
                 self._rt_exec.shutdown()
                 self._rt_node.destroy_node()
+                self._rt = None
             if self._pool is not None:
                 self._pool.shutdown(wait=True)
-            return super().destroy_node()
+                self._pool = None
 
-    return OnboardNode()
+    return bring_up(OnboardNode(), autostart)
 
 
 def _parse_references(refs: Any, where: str) -> dict[str, dict[str, Any]]:

@@ -155,20 +155,24 @@ def validate_references(refs, source: str = "update") -> dict:
     return out
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.node import Node
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
 
     from hd_onboard.node import declare, diag_status
 
-    class TwinNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class TwinNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
+
+        def configure(self):
             from hd_twin import state as sv
 
             self.model_roots = sv.model_roots(self.p["model_roots"], self.p["model_dir"])
@@ -182,8 +186,10 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self._seen: collections.OrderedDict[bytes, None] = collections.OrderedDict()
             #: short summaries of the last MAX_REFUSALS refused updates (field, problem, size, digest)
             self.refusals: collections.deque = collections.deque(maxlen=MAX_REFUSALS)
-            self._publish()
             ru.contain_callbacks(self, "hdphm/twin")
+
+        def activate(self):
+            self._publish()
 
         def _publish(self):
             self.pub.publish(ru.json_msg(self.state))
@@ -222,4 +228,4 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.get_logger().info(f"twin revision {self.state['revision']} by {self.state['updated_by']}")
             self._publish()
 
-    return TwinNode()
+    return bring_up(TwinNode(), autostart)

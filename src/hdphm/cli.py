@@ -28,6 +28,7 @@ COMMAND_MODULES = (
     "hd_ground.cli",         # discover, ground ...
     "hdphm.ros_cli",         # node, stack, replay, record
     "hdphm.bench_cli",       # bench
+    "hdphm.report_cli",      # report: one self-contained HTML page of a run or fleet store
 )
 
 

@@ -45,9 +45,12 @@ CONFIG_DIR = Path(__file__).resolve().parents[2] / "ros2_ws" / "config"
 # --------------------------------------------------------------------------
 # building nodes
 # --------------------------------------------------------------------------
-def make_node(name: str, context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+def make_node(name: str, context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     """Instantiate one of the four stack nodes by name (``param_services=False``: no ``ros2 param`` services,
-    fewer entities for the executor to wait on; used by the in-process replay job)."""
+    fewer entities for the executor to wait on; used by the in-process replay job). The nodes are managed
+    (lifecycle) nodes: ``autostart`` configures and activates them at once; ``autostart=False`` leaves them
+    unconfigured for a lifecycle manager (``hdphm.managed``)."""
     if name == "onboard":
         from hd_onboard.node import make_node as mk
     elif name == "twin":
@@ -58,7 +61,7 @@ def make_node(name: str, context=None, overrides: dict[str, Any] | None = None, 
         from hd_ground.node import make_node as mk
     else:
         raise ValueError(f"unknown node {name!r}; one of {', '.join(NODES)}")
-    return mk(context=context, overrides=overrides, param_services=param_services)
+    return mk(context=context, overrides=overrides, param_services=param_services, autostart=autostart)
 
 
 def ros_args_for(name: str, extra: list[str] | None) -> list[str]:
@@ -859,6 +862,9 @@ def _pop_domain(args) -> None:
     ra = list(args.ros_args or [])
     end = ra.index("--ros-args") if "--ros-args" in ra else len(ra)
     head, tail = ra[:end], ra[end:]
+    if hasattr(args, "managed") and "--managed" in head:
+        args.managed = True
+        head.remove("--managed")
     opts = ("--domain-id", "--rt-priority") if hasattr(args, "rt_priority") else ("--domain-id",)
     for opt in opts:
         for k, tok in enumerate(head):
@@ -910,7 +916,10 @@ def cmd_node(args) -> int:
         print(f"hdphm node: {'SCHED_FIFO priority %d' % args.rt_priority if not why else 'not real-time: ' + why}",
               file=sys.stderr)
     ctx = ru.init_context(args.domain_id, ros_args_for(args.name, args.ros_args))
-    node = make_node(args.name, ctx)
+    node = make_node(args.name, ctx, autostart=not args.managed)
+    if args.managed:
+        print(f"hdphm node: {args.name} is unconfigured, waiting for a lifecycle manager "
+              f"(services /{node.get_name()}/change_state, /{node.get_name()}/get_state)", file=sys.stderr)
     ex = ru.make_executor(ctx)
     ex.add_node(node)
     stop = _stop_on_signals()
@@ -1095,6 +1104,9 @@ def register(sub) -> None:
     p.add_argument("--rt-priority", type=int, default=0, choices=range(0, 100), metavar="0-99",
                    help="run the process SCHED_FIFO at this priority (middleware receive threads included; "
                         "worker threads stay normal); needs CAP_SYS_NICE; 0: normal scheduling")
+    p.add_argument("--managed", action="store_true",
+                   help="leave the node unconfigured: a lifecycle manager configures and activates it through "
+                        "/NODE/change_state (default: configure and activate at start)")
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args -p name:=value ...")
     p.set_defaults(func=cmd_node, fast_exit=True)
 
