@@ -260,6 +260,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mission-hours", type=float, default=3500.0,
                     help="hd_sim wear acceleration (hours one fleet mission stands for)")
     ap.add_argument("--particles", type=int, default=1000)
+    ap.add_argument("--merge", action="store_true",
+                    help="update OUT/bench_families.json (rerun some worlds/parts, keep the others)")
     a = ap.parse_args(argv)
     worlds = [w for w in a.worlds.split(",") if w]
     parts = [p for p in a.parts.split(",") if p]
@@ -278,9 +280,11 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     res: dict = {}
     jpath = out / "bench_families.json"
+    if a.merge and jpath.exists():
+        res = json.loads(jpath.read_text())["results"]
     t_all = time.perf_counter()
     for w in worlds:
-        res[w] = {}
+        res.setdefault(w, {})
         wd = out / w
         for part in parts:
             t0 = time.perf_counter()
@@ -307,6 +311,7 @@ def main(argv: list[str] | None = None) -> int:
                 r = {"error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=3)}
                 print(f"    ERROR {r['error']}", flush=True)
             r["wall_s"] = time.perf_counter() - t0
+            r["args"] = dict(vars(a))
             res[w][part] = r
             jpath.write_text(json.dumps({"args": vars(a), "results": res}, indent=1, default=str))
     print()
