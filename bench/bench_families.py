@@ -65,7 +65,7 @@ def case_bags(world: str, effect: str | None, params, out: Path, *, duration: fl
     if world == "plant2":
         from tests.plants import ema2
 
-        return list(ema2.write_case(out, effect or "clean", seed=seed)["bags"])
+        return list(ema2.write_case(out, effect or "clean", seed=seed, duration=duration)["bags"])
     from hd_sim.families import write_family_case
 
     return list(write_family_case(out, world, effect, params, n_missions=4, duration=duration, seed=seed)["bags"])

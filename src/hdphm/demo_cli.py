@@ -107,7 +107,8 @@ def _score(fleet: Path, aid: str, obs_json: Path, out: Path, truth: dict, args) 
     eol = next(x["eol_mission"] for x in truth["actuators"] if x["actuator_id"] == aid)
     if eol is None:
         return {"note": f"{aid} did not reach end of life within {args.max_missions} missions: nothing to score"}
-    m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), alpha=0.2)
+    m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), alpha=0.2, samples=hist.samples,
+                        rul_horizon=hist.meta.get("rul_horizon"))
     save_alpha_lambda(out / f"alpha_lambda_{aid}.png", hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), 0.2,
                       title=f"{aid}: RUL (held-out actuator)", unit="missions")
     m["eol_mission"] = eol
@@ -172,7 +173,8 @@ def _print_report(rep: dict, summary: dict) -> None:
         print(f"RUL (batch, same core as the node): at mission {last['t']:.0f} P50 {last['p50']:.1f} missions "
               f"[P5 {last['p5']:.1f}, P95 {last['p95']:.1f}]; true end of life at mission {sc['eol_mission']}")
         for label, d in (("batch", sc), ("node", sc.get("node") or {})):
-            keys = [k for k in ("alpha_lambda", "fraction_in_cone", "coverage_p5_p95", "cra", "prognostic_horizon")
+            keys = [k for k in ("alpha_lambda_point", "alpha_lambda_beta", "frac_in_cone_lambda_ge_0.5",
+                                "coverage_p5_p95", "cra", "ph_point", "ph_beta")
                     if k in d]
             if keys:
                 print(f"  {label}: " + "; ".join(f"{k} {_fmt(d[k])}" for k in keys))
