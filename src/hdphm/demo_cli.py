@@ -142,7 +142,14 @@ def run_demo(args) -> int:
               "recorded_files": len(summary.get("recorded_files") or []),
               "rul_score": score, "wall_s": time.perf_counter() - t_start}
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
+    (out / "stack_summary.json").write_text(json.dumps(
+        {k: summary.get(k) for k in ("flags", "health", "health_history", "n_warn", "n_error", "speedup", "twin")},
+        indent=1, default=str))
     _print_report(report, summary)
+    from hdphm.report import write_report
+
+    page = write_report(out, out / "report.html", title=f"hdphm demo: held-out actuator {test_id}")
+    print(f"report page (open in a browser, works offline): {page}")
     return 0
 
 
