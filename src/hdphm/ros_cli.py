@@ -916,13 +916,15 @@ def cmd_node(args) -> int:
         print(f"hdphm node: {'SCHED_FIFO priority %d' % args.rt_priority if not why else 'not real-time: ' + why}",
               file=sys.stderr)
     ctx = ru.init_context(args.domain_id, ros_args_for(args.name, args.ros_args))
+    # handlers before the node exists: a signal that comes while it configures (it may already publish)
+    # stops the loop below at once instead of raising KeyboardInterrupt
+    stop = _stop_on_signals()
     node = make_node(args.name, ctx, autostart=not args.managed)
     if args.managed:
         print(f"hdphm node: {args.name} is unconfigured, waiting for a lifecycle manager "
               f"(services /{node.get_name()}/change_state, /{node.get_name()}/get_state)", file=sys.stderr)
     ex = ru.make_executor(ctx)
     ex.add_node(node)
-    stop = _stop_on_signals()
     try:
         _spin_until_stopped(ex, stop)
     except KeyboardInterrupt:
