@@ -10,9 +10,15 @@ from hd_onboard.features import StiffnessLaw, block_features, mission_features, 
 from hd_prognostic import realdata as R
 from hd_prognostic.observation import ObservationModel
 
+from tests.prognostic.lifesynth import MEASURED
 
+needs_data = pytest.mark.skipif(not (MEASURED / "nasa_battery").is_dir() or not (MEASURED / "virkler").is_dir(),
+                                reason="measured data folder not found (set HDPHM_MEASURED_DATA)")
+
+
+@needs_data
 def test_battery_loo_runs_and_beats_nothing_silly():
-    out = R.run_battery(cells=("B0005", "B0006"), eol_fracs=(0.7,), n_particles=300, t_start=60)
+    out = R.run_battery(MEASURED / "nasa_battery", cells=("B0005", "B0006"), eol_fracs=(0.7,), n_particles=300, t_start=60)
     assert set(out["units"]) == {"B0005@0.7", "B0006@0.7"}
     for u in out["units"].values():
         m = u["metrics"]
@@ -27,15 +33,16 @@ def test_battery_bad_file(tmp_path):
         R.load_battery("B9", tmp_path)
 
 
+@needs_data
 def test_virkler_units_and_paris_fit():
-    specs = R.load_virkler()
+    specs = R.load_virkler(MEASURED / "virkler")
     assert len(specs) == 68
     # failure at 49.8 mm between 200 k and 330 k cycles for every specimen (the known scatter)
     nf = np.array([s.N_fail for s in specs])
     assert nf.min() > 2.0e5 and nf.max() < 3.3e5
     fit = R.fit_paris(specs[::8])
     assert 2.5 < fit["m"] < 5.0
-    out = R.run_virkler(n_particles=300, max_specimens=2)
+    out = R.run_virkler(MEASURED / "virkler", n_particles=300, max_specimens=2)
     assert len(out["units"]) == 4
     assert out["aggregate"]["cra"] > 0.5
 
