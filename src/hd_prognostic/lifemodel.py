@@ -580,7 +580,10 @@ class LifeModel:
         info = {"n_units": len(units), "n_failures": nfail, "n_censored": len(units) - nfail,
                 "n_records": int(sum(np.isfinite(u.y).sum() for u in units)), "log_likelihood": float(-r2.fun),
                 "n_params": len(keys), "nelder_mead_evals": int(r.nfev + r2.nfev), "converged": bool(r2.success),
-                "start": theta0, "notes": notes, "units": [u.unit for u in units]}
+                "start": theta0, "notes": notes, "units": [u.unit for u in units],
+                "rate_median": float(np.nanmedian([u.rate() for u in units])),
+                "hours_per_step": (float(np.median(hp)) if (hp := [u.hours_per_step for u in units
+                                                                  if u.hours_per_step]) else None)}
         return cls(th, E_ref, exposure, feature, ins, info, time_unit)
 
     # ---- prognosis
@@ -645,7 +648,7 @@ def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, 
     rng = np.random.default_rng(seed)
     hist = RULHistory(unit=u.unit, time_unit=model.time_unit, state_names=("L",), threshold=1.0)
     ukf = _UKF(model) if method == "ukf" else None
-    hrs, h5, h50, h95 = model.fit_info.get("hours_per_step") or u.hours_per_step, [], [], []
+    hrs, h5, h50, h95 = u.hours_per_step or model.fit_info.get("hours_per_step"), [], [], []
     if ukf is None:
         ZG, WG = model.posterior(u)
     for k, tk in enumerate(u.t):
@@ -750,3 +753,15 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     if errs:
         m.fit_info["exposure_errors"] = errs
     return m
+
+
+def predict_at(model: LifeModel, u: UnitHistory, rng: np.random.Generator, n_samples: int = 500) -> dict:
+    """One prediction at the unit's last record (what the prognostic node publishes per mission):
+    latent degradation P5/P50/P95 (1 = median failure threshold) and RUL samples in the unit's time axis."""
+    tk = float(u.t[-1])
+    zg, wg = model.posterior(u, [tk])
+    zg, wg = zg[0], wg[0]
+    z = rng.choice(zg, n_samples, p=wg) + rng.uniform(-0.5, 0.5, n_samples) * (zg[1] - zg[0])
+    X = (max(u.E[-1], 0.0) / model.E_ref) ** model.b
+    lq = model.latent_quantiles(zg, wg, X)
+    return {"latent": lq, "rul": model.rul_samples(z, u, tk, rng)}
