@@ -57,3 +57,51 @@ def sim_mission():
     from hd_sim import simulate_mission
 
     return simulate_mission(None, None, "inspection", 3, duration=3.0)
+
+
+# --- plant2: the independently written EMA plant of tests/plants/ema2.py (issue 9) -----------------
+@pytest.fixture(scope="session")
+def plant2_case_bags(tmp_path_factory):
+    """Factory ``plant2_case_bags(effect="clean") -> dict`` of the independent plant (tests/plants/ema2.py).
+
+    One actuator, four 12 s contract bags (the same four missions for every effect, seeds 0..3), one
+    undeclared effect (names: ``tests.plants.ema2.EFFECTS``). Keys: ``bags`` (4 paths), ``fit`` (first
+    three), ``held_out`` (the fourth), ``truth`` (effect, parameters, signal it shows in), ``truth_path``,
+    ``signals`` (simulated arrays incl. truth, for checks only). All effects are simulated in one batch on
+    first use (about 15 s on one core); each effect's bags are written when first asked for (about 5 s).
+    """
+    from tests.plants import ema2
+
+    root = tmp_path_factory.mktemp("plant2_cases")
+    state: dict = {}
+
+    def make(effect: str = "clean") -> dict:
+        if effect not in ema2.EFFECTS:
+            raise ValueError(f"plant2: unknown effect {effect!r}; known: {', '.join(ema2.EFFECTS)}")
+        if "sigs" not in state:
+            state["sigs"] = ema2.simulate_cases()
+        if effect not in state:
+            state[effect] = ema2.write_case(root / effect, effect, sigs=state["sigs"][effect])
+        return state[effect]
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def plant2_fleet(tmp_path_factory):
+    """A small run-to-failure fleet of the independent plant: ``{"dir", "events", "truth"}``.
+
+    4 units, at most 10 missions of 3 s each (nominal life 5 missions, unit scatter), inspections every
+    third mission. ``dir/EMA2-Uxx/mission_000.mcap`` ... (missions flown only), ``dir/events.csv``
+    (``actuator_id,mission_index,event,quantity,value``), ``dir/fleet_truth.json`` (true wear per mission,
+    thresholds, failure missions: scoring only).
+    """
+    import csv
+
+    from tests.plants import ema2
+
+    out = tmp_path_factory.mktemp("plant2_fleet")
+    truth = ema2.fleet(out, units=4, missions=10, duration=3.0, seed=3, life_missions=5.0, inspect_every=3)
+    with open(out / "events.csv") as f:
+        events = list(csv.DictReader(f))
+    return {"dir": out, "events": events, "truth": truth}

@@ -1,0 +1,578 @@
+"""Identification shared by the twin and discovery: separable least squares with identified shapes.
+
+A model ``y ~ X(shape) @ coef`` is linear in ``coef`` and nonlinear in a few
+shape parameters (friction transition width, Stribeck speed and exponent,
+dead-zone width, ...). Variable projection: for any shape the coefficients are
+the (weighted) least-squares solution, so only the shape is searched. The shape
+is chosen by **cross-validated profile search** (leave-one-block-out over
+contiguous time blocks, never interleaved samples): a coarse log grid, then a
+bounded refinement (``scipy.optimize.minimize_scalar`` / ``minimize``). Its
+uncertainty is the block jackknife of that choice; the coefficients' covariance
+is the joint block jackknife (shape re-chosen without each block, coefficients
+refitted at it: robust to coloured residuals and to blocks that differ, and it
+carries the shape's uncertainty into the coefficients), or the classical OLS covariance when there are fewer than
+3 blocks. A shape is *identified* only if the held-out error depends on it (the
+CV profile is not flat), its optimum is inside the searched range, and its
+jackknife standard deviation is below its size; otherwise the result says so
+(``identified[name]`` and ``notes``) and the shape is set to the bound the data
+are consistent with.
+
+Public API (used by ``hd_twin`` and ``hd_ground.discovery``; never imports
+``hd_sim`` or ``hd_ground``):
+
+* :func:`derivative` -- Savitzky-Golay derivative designed at the measured rate.
+* :func:`speed_noise_sigma` -- white-noise sigma of a measured speed (MAD of second differences).
+* :func:`prepare_signals` -- one signal table from one or several files, with ``file``,
+  ``block`` and the derivatives ``alpha_m`` / ``alpha_f``.
+* :class:`Shape` -- a nonlinear parameter to search: name, bounds, log scale.
+* :func:`fit_separable` -- the generic variable-projection fit -> :class:`SeparableFit`.
+* :func:`identify_torque_balance` -- the motor-side torque balance -> :class:`Identified`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+#: Default -3 dB point [Hz] of the derivative filter (cubic Savitzky-Golay); about a drive's speed-loop
+#: bandwidth, and the window scales with the measured rate so the band stays put.
+DERIV_CUTOFF_HZ = 40.0
+
+
+class IdentifyError(ValueError):
+    """Input the identification cannot work with (the message names the problem)."""
+
+
+# ---------------------------------------------------------------------------
+# signal preparation
+# ---------------------------------------------------------------------------
+
+
+def sg_window(fs: float, cutoff_hz: float = DERIV_CUTOFF_HZ, polyorder: int = 3) -> int:
+    """Odd Savitzky-Golay window length for a first derivative with its -3 dB point at ``cutoff_hz``.
+
+    Designed numerically at the sample rate ``fs``: the longest window whose derivative filter still has
+    |H(f)| >= |j 2 pi f| / sqrt(2) at ``cutoff_hz`` (the ideal differentiator's gain, -3 dB), so a 200 Hz
+    and a 2 kHz log get the same band.
+    """
+    from scipy.signal import savgol_coeffs
+
+    fc = min(max(cutoff_hz, 1e-6), 0.45 * fs)
+    best = polyorder + 2 if polyorder % 2 else polyorder + 1  # smallest odd window > polyorder
+    m = best // 2
+    while 2 * m + 1 < 20 * fs / fc:
+        w = 2 * m + 1
+        c = savgol_coeffs(w, polyorder, deriv=1, delta=1.0 / fs, use="dot")
+        k = np.arange(-m, m + 1)
+        h = abs(np.sum(c * np.exp(-2j * np.pi * fc * k / fs)))
+        if h < (2 * np.pi * fc) / np.sqrt(2):
+            break
+        best = w
+        m += 1
+    return best
+
+
+def derivative(x: np.ndarray, t: np.ndarray, *, segment: np.ndarray | None = None,
+               cutoff_hz: float = DERIV_CUTOFF_HZ, polyorder: int = 3) -> np.ndarray:
+    """Time derivative of ``x`` [unit/s], Savitzky-Golay smoothed, per contiguous segment.
+
+    The window is designed at each segment's median sample rate (:func:`sg_window`), so a 200 Hz and a
+    2 kHz log get the same cut-off. Segments too short for the window use central differences.
+    """
+    from scipy.signal import savgol_filter
+
+    x = np.asarray(x, float)
+    t = np.asarray(t, float)
+    seg = np.zeros(len(x), int) if segment is None else np.asarray(segment)
+    out = np.full(len(x), np.nan)
+    for s in np.unique(seg):
+        idx = np.flatnonzero(seg == s)
+        if len(idx) < 3:
+            continue
+        dt = float(np.median(np.diff(t[idx])))
+        if not dt > 0:
+            raise IdentifyError(f"time stamps do not increase in segment {s}")
+        w = sg_window(1.0 / dt, cutoff_hz, polyorder)
+        if len(idx) > w:
+            out[idx] = savgol_filter(x[idx], w, polyorder, deriv=1, delta=dt)
+        else:
+            out[idx] = np.gradient(x[idx], t[idx])
+    return out
+
+
+def speed_noise_sigma(omega: np.ndarray, segment: np.ndarray | None = None) -> float:
+    """Robust white-noise sigma of a measured speed (MAD of second differences within segments).
+
+    A second difference removes smooth motion (up to its curvature); white noise of sigma s gives a
+    second difference of sigma sqrt(6) s.
+    """
+    omega = np.asarray(omega, float)
+    d2 = omega[2:] - 2 * omega[1:-1] + omega[:-2]
+    ok = np.isfinite(d2)
+    if segment is not None:
+        segment = np.asarray(segment)
+        ok &= segment[2:] == segment[:-2]
+    d2 = d2[ok]
+    if len(d2) < 10:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def prepare_signals(signals: Mapping[str, np.ndarray] | Sequence[Mapping[str, np.ndarray]], *,
+                    blocks_per_file: int = 4, cutoff_hz: float = DERIV_CUTOFF_HZ) -> dict[str, np.ndarray]:
+    """One signal table from one file (dict) or several (list of dicts), finite rows only.
+
+    Adds ``file`` (file index, kept if given), ``block`` (contiguous time blocks, ``blocks_per_file`` per
+    file, the cross-validation folds), ``alpha_m`` = d omega_m/dt and ``alpha_f`` = d omega_f/dt when
+    absent (:func:`derivative` per file and ``segment``). ``t`` is required.
+    """
+    parts = [signals] if isinstance(signals, Mapping) else list(signals)
+    if not parts:
+        raise IdentifyError("no signals given")
+    if len(parts) == 1 and "file" in parts[0]:
+        f = np.asarray(parts[0]["file"])
+        parts = [{k: np.asarray(v)[f == i] for k, v in parts[0].items()} for i in np.unique(f)]
+    tables = []
+    for i, p in enumerate(parts):
+        s = {k: np.asarray(v, float) for k, v in p.items() if np.ndim(v) == 1}
+        if "t" not in s:
+            raise IdentifyError(f"file {i}: no time stamps 't'")
+        n = len(s["t"])
+        for k, v in s.items():
+            if len(v) != n:
+                raise IdentifyError(f"file {i}: signal {k} has {len(v)} samples, 't' has {n}")
+        seg = s.get("segment")
+        for src, dst in (("omega_m", "alpha_m"), ("omega_f", "alpha_f")):
+            if src in s and dst not in s:
+                s[dst] = derivative(s[src], s["t"], segment=seg, cutoff_hz=cutoff_hz)
+        frac = (s["t"] - s["t"][0]) / max(float(s["t"][-1] - s["t"][0]), 1e-12)
+        s["block"] = np.minimum((frac * blocks_per_file).astype(int), blocks_per_file - 1) + i * blocks_per_file
+        s["file"] = np.full(n, i, float)
+        tables.append(s)
+    keys = set.intersection(*(set(s) for s in tables))
+    out = {k: np.concatenate([s[k] for s in tables]) for k in sorted(keys)}
+    ok = np.ones(len(out["t"]), bool)
+    for v in out.values():
+        ok &= np.isfinite(v)
+    out = {k: v[ok] for k, v in out.items()}
+    out["block"] = out["block"].astype(int)
+    out["file"] = out["file"].astype(int)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# block least squares
+# ---------------------------------------------------------------------------
+
+
+class BlockGram:
+    """Per-block Gram matrices: leave-one-block-out least squares in O(blocks p^3).
+
+    ``X`` (n, p), ``y`` (n,), ``block`` (n,) ints, optional ``weights`` (n,) >= 0.
+    """
+
+    def __init__(self, X: np.ndarray, y: np.ndarray, block: np.ndarray, weights: np.ndarray | None = None):
+        if weights is not None:
+            sw = np.sqrt(np.asarray(weights, float))
+            X, y = X * sw[:, None], y * sw
+        self.scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
+        Xs = X / self.scale
+        self.blocks = np.unique(block)
+        self.n = np.array([np.sum(block == b) for b in self.blocks])
+        self.G = np.stack([Xs[block == b].T @ Xs[block == b] for b in self.blocks])
+        self.g = np.stack([Xs[block == b].T @ y[block == b] for b in self.blocks])
+        self.yy = np.array([y[block == b] @ y[block == b] for b in self.blocks])
+
+    def _solve(self, G, g):
+        p = G.shape[-1]
+        lam = 1e-10 * np.trace(G, axis1=-2, axis2=-1)[..., None, None] / max(p, 1)
+        return np.linalg.solve(G + lam * np.eye(p), g[..., None])[..., 0]
+
+    def coef(self, use: np.ndarray | None = None) -> np.ndarray:
+        """Coefficients fitted on the blocks in ``use`` (bool per block; default all), unscaled units."""
+        use = np.ones(len(self.blocks), bool) if use is None else use
+        return self._solve(self.G[use].sum(0), self.g[use].sum(0)) / self.scale
+
+    def sse(self, use: np.ndarray | None = None) -> float:
+        """Training SSE on the blocks in ``use``."""
+        use = np.ones(len(self.blocks), bool) if use is None else use
+        G, g, yy = self.G[use].sum(0), self.g[use].sum(0), self.yy[use].sum()
+        b = self._solve(G, g)
+        return float(yy - 2 * b @ g + b @ G @ b)
+
+    def cv_sse(self, use: np.ndarray | None = None) -> np.ndarray:
+        """Held-out SSE of each block in ``use``, predicted from the other blocks in ``use`` (NaN elsewhere)."""
+        use = np.ones(len(self.blocks), bool) if use is None else use
+        Gt, gt = self.G[use].sum(0), self.g[use].sum(0)
+        beta = self._solve(Gt[None] - self.G, gt[None] - self.g)
+        out = self.yy - 2 * np.einsum("bi,bi->b", beta, self.g) + np.einsum("bi,bij,bj->b", beta, self.G, beta)
+        out[~use] = np.nan
+        return out
+
+    def jackknife_cov(self) -> np.ndarray | None:
+        """Block-jackknife covariance of the coefficients (unscaled units); None with < 3 blocks."""
+        nb = len(self.blocks)
+        if nb < 3:
+            return None
+        Gt, gt = self.G.sum(0), self.g.sum(0)
+        B = self._solve(Gt[None] - self.G, gt[None] - self.g) / self.scale
+        D = B - B.mean(0)
+        return (nb - 1) / nb * (D.T @ D)
+
+
+# ---------------------------------------------------------------------------
+# separable fit with identified shapes
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class Shape:
+    """A nonlinear parameter searched by CV profile: ``lo < value < hi`` (log grid when ``log``)."""
+
+    name: str
+    lo: float
+    hi: float
+    log: bool = True
+    n_grid: int = 12
+
+    def grid(self) -> np.ndarray:
+        return np.geomspace(self.lo, self.hi, self.n_grid) if self.log else np.linspace(self.lo, self.hi, self.n_grid)
+
+    def to_u(self, v):
+        return np.log(v) if self.log else np.asarray(v, float)
+
+    def from_u(self, u):
+        return float(np.exp(u)) if self.log else float(u)
+
+
+@dataclass
+class SeparableFit:
+    """Result of :func:`fit_separable` (all in the units of ``y`` and the columns)."""
+
+    names: list[str]
+    coef: np.ndarray
+    cov: np.ndarray
+    shape: dict[str, float]
+    shape_sd: dict[str, float]
+    identified: dict[str, bool]
+    cv_rmse: float  # leave-one-block-out RMSE at the chosen shape
+    rmse: float  # training RMSE at the chosen shape
+    profile: dict[str, list]  # name -> [[value, cv_rmse], ...] along the grid (others at their optimum)
+    notes: list[str] = field(default_factory=list)
+
+
+def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: list[str], block: np.ndarray,
+                  shapes: Sequence[Shape] = (), *, weights: np.ndarray | None = None,
+                  flat_tol: float = 1e-3, jackknife: bool = True) -> SeparableFit:
+    """Variable projection: ``y ~ design(shape) @ coef`` with the shape chosen by CV profile search.
+
+    ``design(shape_dict)`` returns the (n, len(names)) column matrix for the given shape values.
+    ``block`` gives the cross-validation folds (contiguous time blocks, >= 3 for CV and jackknife).
+    A shape is flagged unidentified (``identified[name] = False``, a note says why) when the CV RMSE
+    over its searched range varies by less than ``flat_tol`` (relative), when the optimum sits on a
+    bound (within 2 % of the searched range: the data only bound it; the bound is kept), or when its
+    jackknife SD exceeds its own size (log shapes: SD of the log value > 1).
+    """
+    y = np.asarray(y, float)
+    block = np.asarray(block)
+    nb = len(np.unique(block))
+    notes: list[str] = []
+    shapes = list(shapes)
+    cache: dict[tuple, BlockGram] = {}
+
+    def gram(vals: tuple) -> BlockGram:
+        if vals not in cache:
+            if len(cache) > 256:
+                cache.clear()
+            X = design(dict(zip([s.name for s in shapes], vals)))
+            cache[vals] = BlockGram(X, y, block, weights)
+        return cache[vals]
+
+    def cv_obj(vals: tuple, use: np.ndarray | None = None) -> float:
+        if nb >= 3:
+            e = gram(vals).cv_sse(use)
+            return float(np.nansum(e))
+        return gram(vals).sse(use)
+
+    def optimise(use: np.ndarray | None, start: tuple | None) -> tuple[tuple, float, dict]:
+        if not shapes:
+            return (), cv_obj((), use), {}
+        grids = [s.grid() for s in shapes]
+        if start is None:
+            mesh = np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(shapes), -1).T
+            vals = [cv_obj(tuple(float(v) for v in row), use) for row in mesh]
+            k = int(np.argmin(vals))
+            best = tuple(float(v) for v in mesh[k])
+            prof = {}
+            vv = np.array(vals).reshape([len(g) for g in grids])
+            for i, s in enumerate(shapes):
+                ax = tuple(j for j in range(len(shapes)) if j != i)
+                prof[s.name] = np.min(vv, axis=ax) if ax else vv
+        else:
+            best, prof = start, {}
+        # bounded refinement within one grid cell (in log for log shapes)
+        lo = [max(s.to_u(s.lo), s.to_u(b) - _cell(s)) for s, b in zip(shapes, best)]
+        hi = [min(s.to_u(s.hi), s.to_u(b) + _cell(s)) for s, b in zip(shapes, best)]
+
+        def f(u):
+            u = np.clip(np.atleast_1d(u), lo, hi)
+            return cv_obj(tuple(s.from_u(ui) for s, ui in zip(shapes, u)), use)
+
+        from scipy.optimize import minimize, minimize_scalar
+
+        if len(shapes) == 1:
+            r = minimize_scalar(f, bounds=(lo[0], hi[0]), method="bounded", options={"xatol": 1e-3})
+            u = np.atleast_1d(r.x)
+            fu = float(r.fun)
+        else:
+            r = minimize(f, [s.to_u(b) for s, b in zip(shapes, best)], method="Nelder-Mead",
+                         bounds=list(zip(lo, hi)), options={"xatol": 1e-3, "fatol": 1e-9, "maxfev": 60 * len(shapes)})
+            u, fu = np.clip(r.x, lo, hi), float(r.fun)
+        f0 = cv_obj(best, use)
+        if fu < f0:
+            best = tuple(s.from_u(ui) for s, ui in zip(shapes, u))
+            f0 = fu
+        return best, f0, prof
+
+    best, fbest, prof = optimise(None, None)
+    g = gram(best)
+    coef = g.coef()
+    n = len(y)
+    rmse = float(np.sqrt(max(g.sse(), 0.0) / n))
+    cv_rmse = float(np.sqrt(max(fbest, 0.0) / n))
+    cov = g.jackknife_cov()
+    if cov is None:
+        X = design(dict(zip([s.name for s in shapes], best)))
+        w = np.ones(n) if weights is None else np.asarray(weights, float)
+        XtWX = X.T @ (X * w[:, None])
+        dof = max(n - X.shape[1], 1)
+        cov = rmse**2 * n / dof * np.linalg.pinv(XtWX)
+        notes.append(f"fewer than 3 blocks ({nb}): classical OLS covariance (assumes white residuals)")
+    shape = {s.name: float(v) for s, v in zip(shapes, best)}
+    shape_sd: dict[str, float] = {}
+    identified: dict[str, bool] = {}
+    for i, s in enumerate(shapes):
+        pr = np.asarray(prof[s.name], float)
+        identified[s.name] = True
+        rng = (np.max(pr) - np.min(pr)) / max(np.min(pr), 1e-300)
+        if rng < flat_tol:
+            identified[s.name] = False
+            notes.append(f"{s.name}: the held-out error does not depend on it over {s.lo:.3g}..{s.hi:.3g} "
+                         f"(CV profile varies by {rng:.1e}); not identified")
+        else:
+            span = s.to_u(s.hi) - s.to_u(s.lo)
+            pos = (s.to_u(best[i]) - s.to_u(s.lo)) / span
+            at = "lower" if pos < 0.02 else ("upper" if pos > 0.98 else None)
+            if at is not None:
+                identified[s.name] = False
+                notes.append(f"{s.name}: the data only bound it (optimum at the {at} bound "
+                             f"{best[i]:.3g} of the searched range); kept at that bound")
+        shape_sd[s.name] = float("nan")
+    if shapes and jackknife and nb >= 3:
+        blocks = np.unique(block)
+        jk, jb = [], []
+        for b in range(len(blocks)):
+            use = np.ones(len(blocks), bool)
+            use[b] = False
+            v, _, _ = optimise(use, best)
+            jk.append([s.to_u(x) for s, x in zip(shapes, v)])
+            jb.append(gram(v).coef(use))
+        jk, jb = np.asarray(jk), np.asarray(jb)
+        # joint jackknife: the coefficients' covariance includes the uncertainty of the shape they depend on
+        d = jb - jb.mean(0)
+        cov = (len(blocks) - 1) / len(blocks) * (d.T @ d)
+        sd_u = np.sqrt((len(blocks) - 1) / len(blocks) * np.sum((jk - jk.mean(0)) ** 2, 0))
+        for i, s in enumerate(shapes):
+            shape_sd[s.name] = float(sd_u[i] * best[i]) if s.log else float(sd_u[i])
+            too_wide = sd_u[i] > 1.0 if s.log else sd_u[i] > abs(best[i])
+            if identified[s.name] and too_wide:
+                identified[s.name] = False
+                notes.append(f"{s.name} = {best[i]:.3g} +- {shape_sd[s.name]:.2g} (block jackknife): "
+                             "uncertain by more than its own size; not identified")
+    profile = {s.name: [[float(v), float(np.sqrt(max(p, 0) / n))] for v, p in zip(s.grid(), prof[s.name])]
+               for s in shapes}
+    return SeparableFit(list(names), coef, cov, shape, shape_sd, identified, cv_rmse, rmse, profile, notes)
+
+
+def _cell(s: Shape) -> float:
+    return (s.to_u(s.hi) - s.to_u(s.lo)) / max(s.n_grid - 1, 1)
+
+
+# ---------------------------------------------------------------------------
+# the torque balance
+# ---------------------------------------------------------------------------
+
+
+def coulomb_shape(omega: np.ndarray, width: float) -> np.ndarray:
+    """Smooth Coulomb transition through zero speed: tanh(omega / width) [-]."""
+    return np.tanh(np.asarray(omega, float) / max(width, 1e-12))
+
+
+#: column name -> (signals, shape) -> array. The torque balance's regressors, one place.
+COLUMNS: dict[str, Callable[[Mapping[str, np.ndarray], Mapping[str, float]], np.ndarray]] = {
+    "tau_m": lambda s, sh: s["tau_m"],
+    "Q_red": lambda s, sh: s["Q_red"],
+    "alpha_m": lambda s, sh: s["alpha_m"],
+    "coulomb": lambda s, sh: coulomb_shape(s["omega_m"], sh["width"]),
+    "omega_m": lambda s, sh: s["omega_m"],
+    "const": lambda s, sh: np.ones(len(s["omega_m"])),
+}
+
+#: physical reading of each coefficient, per target
+MEANING = {
+    "Q_red": {"tau_m": "N eta (gear ratio x efficiency)", "alpha_m": "-N eta J_eq", "coulomb": "-N eta T_C",
+              "omega_m": "-N eta b", "const": "output-side offset"},
+    "tau_m": {"Q_red": "1 / (N eta)", "alpha_m": "J_eq", "coulomb": "T_C", "omega_m": "b",
+              "const": "motor-side offset"},
+}
+
+
+@dataclass
+class Identified:
+    """An identified torque balance: ``target ~ sum coef_i * column_i(signals; shape)``.
+
+    ``names`` column names (keys of :data:`COLUMNS`), ``coef`` (p,), ``cov`` (p, p) block-jackknife
+    covariance, ``shape`` {"width": rad/s}, ``shape_sd`` its SD, ``identified`` per shape, ``notes``
+    (identifiability statements, what was done), ``target``, ``cv_rmse`` / ``rmse`` [target unit],
+    ``cutoff_hz`` of the derivative filter (``predict`` differentiates the same way).
+    """
+
+    target: str
+    names: list[str]
+    coef: np.ndarray
+    cov: np.ndarray
+    shape: dict[str, float]
+    shape_sd: dict[str, float]
+    identified: dict[str, bool]
+    notes: list[str]
+    cv_rmse: float = float("nan")
+    rmse: float = float("nan")
+    cutoff_hz: float = DERIV_CUTOFF_HZ
+
+    @property
+    def sd(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+
+    def columns(self, signals: Mapping[str, np.ndarray]) -> np.ndarray:
+        s = dict(signals)
+        if "alpha_m" in self.names and "alpha_m" not in s:
+            if "t" not in s:
+                raise IdentifyError("predict needs 't' (or 'alpha_m') to differentiate omega_m")
+            s["alpha_m"] = derivative(s["omega_m"], s["t"], segment=s.get("segment"), cutoff_hz=self.cutoff_hz)
+        return np.stack([np.asarray(COLUMNS[n](s, self.shape), float) for n in self.names], 1)
+
+    def predict(self, signals: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The model's ``target`` for ``signals`` (one file: a dict of arrays with ``t`` or ``alpha_m``)."""
+        return self.columns(signals) @ self.coef
+
+    def to_dict(self) -> dict:
+        return {"format": "hdphm-identified/1", "target": self.target, "names": list(self.names),
+                "coef": [float(c) for c in self.coef], "cov": np.asarray(self.cov, float).tolist(),
+                "shape": dict(self.shape), "shape_sd": dict(self.shape_sd), "identified": dict(self.identified),
+                "notes": list(self.notes), "cv_rmse": self.cv_rmse, "rmse": self.rmse, "cutoff_hz": self.cutoff_hz,
+                "meaning": {n: MEANING.get(self.target, {}).get(n, "") for n in self.names}}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> "Identified":
+        if d.get("format") != "hdphm-identified/1":
+            raise IdentifyError(f"not an identified torque balance (format {d.get('format')!r})")
+        unknown = [n for n in d["names"] if n not in COLUMNS]
+        if unknown:
+            raise IdentifyError(f"identified torque balance: unknown columns {unknown}")
+        return cls(d["target"], list(d["names"]), np.asarray(d["coef"], float), np.asarray(d["cov"], float),
+                   {k: float(v) for k, v in d["shape"].items()}, {k: float(v) for k, v in d["shape_sd"].items()},
+                   {k: bool(v) for k, v in d.get("identified", {}).items()}, list(d.get("notes", [])),
+                   float(d.get("cv_rmse", np.nan)), float(d.get("rmse", np.nan)),
+                   float(d.get("cutoff_hz", DERIV_CUTOFF_HZ)))
+
+
+def identify_torque_balance(signals, target: str = "Q_red", *, blocks_per_file: int = 4,
+                            cutoff_hz: float = DERIV_CUTOFF_HZ, standstill_sigmas: float = 3.0,
+                            weights: np.ndarray | None = None, const: str = "auto",
+                            wald_sigmas: float = 3.0) -> Identified:
+    """Identify the motor-side torque balance with an identified Coulomb transition width.
+
+    ``target="Q_red"``: Q_red ~ a tau_m + b alpha_m + c tanh(omega_m / width) + d omega_m (+ e);
+    ``target="tau_m"``:  tau_m ~ a Q_red + b alpha_m + c tanh(omega_m / width) + d omega_m (+ e)
+    (a = 1/(N eta), b = J_eq, c = T_C, d = b_visc; without Q_red the load column is left out, noted).
+    ``signals``: a dict of arrays (``t``, ``omega_m``, ``tau_m``, ``Q_red``; optional ``file``, ``segment``,
+    ``alpha_m``) or a list of such dicts (one per file); see :func:`prepare_signals`.
+
+    Rows at standstill (|omega_m| < ``standstill_sigmas`` x the speed-noise sigma) are left out: the
+    friction there is static and the measured sign is noise. The width is searched between a tenth of
+    that noise sigma and half the q90 speed; if the data have no zero crossings (motion in one direction)
+    it is not identifiable and the note says so. The constant enters (``const="auto"``) only if it
+    lowers the CV error and its jackknife z reaches ``wald_sigmas``; ``"yes"``/``"no"`` force it.
+    """
+    if target not in ("Q_red", "tau_m"):
+        raise IdentifyError(f"target must be 'Q_red' or 'tau_m', not {target!r}")
+    s = prepare_signals(signals, blocks_per_file=blocks_per_file, cutoff_hz=cutoff_hz)
+    other = "tau_m" if target == "Q_red" else "Q_red"
+    for k in ("omega_m", target):
+        if k not in s:
+            raise IdentifyError(f"identify_torque_balance: signal {k} missing (have {sorted(s)})")
+    notes: list[str] = []
+    names = [other, "alpha_m", "coulomb", "omega_m"]
+    if other not in s or np.std(s[other]) == 0:
+        if target == "Q_red":
+            raise IdentifyError("identify_torque_balance(target='Q_red') needs tau_m")
+        names.remove(other)
+        notes.append("Q_red not measured: the load path Q_red/(N eta) is absent from the tau_m balance")
+    w = s["omega_m"]
+    sig_w = max((speed_noise_sigma(w[s["file"] == f], s.get("segment", s["file"])[s["file"] == f])
+                 for f in np.unique(s["file"])), default=0.0)
+    keep = np.ones(len(w), bool)
+    if standstill_sigmas > 0 and sig_w > 0:
+        keep = np.abs(w) >= standstill_sigmas * sig_w
+        if keep.mean() < 0.1:
+            keep[:] = True
+            notes.append("almost no motion above the speed noise: standstill rows kept")
+        elif (~keep).any():
+            notes.append(f"{int((~keep).sum())} standstill samples (|omega_m| < {standstill_sigmas:g} x speed-noise "
+                         f"sigma {sig_w:.3g} rad/s) left out: static friction is unobservable there")
+    s = {k: v[keep] for k, v in s.items()}
+    wts = None if weights is None else np.asarray(weights, float)[keep]
+    w = s["omega_m"]
+    scale = float(np.quantile(np.abs(w), 0.9))
+    if scale <= 0:
+        raise IdentifyError("omega_m is zero throughout: no torque balance can be identified")
+    moving = np.abs(w) > 0.02 * scale
+    reversal = min(np.mean(w[moving] > 0), np.mean(w[moving] < 0)) if moving.any() else 0.0
+    lo = max(sig_w / 10, 1e-4 * scale, 1e-6)
+    shapes = [Shape("width", lo, max(0.5 * scale, 10 * lo), log=True, n_grid=12)]
+    if reversal < 0.02:
+        notes.append("omega_m: motion in one direction only (no zero crossings): the Coulomb transition width is "
+                     "not identifiable and the Coulomb term is collinear with a constant; width kept at the lower "
+                     "bound (a hard sign), constant left out")
+        const = "no"
+
+    def fit(cols):
+        def design(sh):
+            return np.stack([COLUMNS[n](s, sh) for n in cols], 1)
+        return fit_separable(s[target], design, cols, s["block"], shapes if "coulomb" in cols else [],
+                             weights=wts)
+
+    res = fit(names)
+    if const in ("auto", "yes"):
+        rc = fit(names + ["const"])
+        z = abs(rc.coef[-1]) / max(np.sqrt(rc.cov[-1, -1]), 1e-300)
+        if const == "yes" or (rc.cv_rmse < res.cv_rmse and z >= wald_sigmas):
+            res = rc
+            names = names + ["const"]
+        else:
+            notes.append(f"constant offset not identified (jackknife z {z:.1f}, CV RMSE {rc.cv_rmse:.4g} vs "
+                         f"{res.cv_rmse:.4g} without): left out")
+    shape, shape_sd, ident = res.shape, res.shape_sd, res.identified
+    if reversal < 0.02:
+        shape, shape_sd, ident = {"width": lo}, {"width": float("nan")}, {"width": False}
+        res.notes = [n for n in res.notes if not n.startswith("width")]
+    elif shape.get("width", lo) < 2 * sig_w:
+        # a measured speed with noise sigma turns even a hard sign into a transition about sigma wide
+        ident = dict(ident, width=False)
+        notes.append(f"width {shape['width']:.3g} rad/s is within 2x the speed-noise sigma {sig_w:.3g} rad/s: the "
+                     "transition is not resolved beyond the measurement noise (consistent with a hard sign); "
+                     "the value is an upper bound")
+    return Identified(target, list(names), res.coef, res.cov, shape, shape_sd, ident, notes + res.notes,
+                      res.cv_rmse, res.rmse, cutoff_hz)
