@@ -124,7 +124,52 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
             ref.append(s)
     res["reference"] = ref
     res["reference_name"] = "wear-truth-calibrated PF (fit_population on /sim/health of the training units)"
+    res["bound"] = threshold_bound(truth, eols)
     return res, exposure
+
+
+def threshold_bound(truth, eols):
+    """In-cone fraction (alpha 0.2, lambda >= 0.5) of a forecast that knows each unit's *true* future wear path
+    and only the population's failure wear (median h_fail of the other units): what a population-level
+    threshold allows at best (scoring code: reads the simulator's truth)."""
+    from hd_prognostic import metrics as M
+
+    acts = [a for a in truth["actuators"] if a["actuator_id"] in eols]
+    hf = {a["actuator_id"]: float(a["params"]["h_fail"]) for a in acts}
+    out = {}
+    for a in acts:
+        aid = a["actuator_id"]
+        pop = float(np.median([v for k, v in hf.items() if k != aid]))
+        h = np.array([m["h"] for m in a["missions"]], float)
+        mi = np.array([m["mission_index"] for m in a["missions"]], float)
+        i = np.flatnonzero(h >= pop)
+        if len(i):
+            tf = mi[i[0]]
+        else:  # extrapolate the last 10 missions' wear rate
+            r = max((h[-1] - h[-11]) / 10.0, 1e-30) if len(h) > 11 else max(h[-1] / max(mi[-1], 1), 1e-30)
+            tf = mi[-1] + np.ceil((pop - h[-1]) / r)
+        eol = eols[aid]
+        t = mi[mi < eol]
+        p = tf - t
+        out[aid] = M.score_history(t, p, p, p, eol)["frac_in_cone_lambda_ge_0.5"]
+    return out
+
+
+def events_fleet(name, fleet_dir, exposure, args):
+    """A fleet of bags with the operator's own ``events.csv`` (e.g. the independent plant's fleet: failures
+    and inspections); scored against the failures in that file. No wear-truth reference (no /sim topics)."""
+    from hd_prognostic.hd import load_fleet_histories, unit_history
+    from hd_prognostic.lifemodel import attach_events, read_events
+
+    ev = read_events(Path(fleet_dir) / "events.csv")
+    acts, _ = load_fleet_histories(fleet_dir, args.feature, "missions", cache_dir=Path(args.out) / "cache" / name,
+                                   workers=args.workers)
+    units = [unit_history(a, args.feature, exposure) for a in acts]
+    attach_events(units, ev)
+    eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
+    g, u, _ = _louo(units, eols, exposure, "mission", args.feature, args.samples, args.seed, True, name)
+    return {"exposure": exposure, "life": g, "ukf": u, "reference": [],
+            "reference_name": "- (no wear truth in these bags)"}
 
 
 def csv_dataset(name, hi, events, args):
@@ -141,6 +186,8 @@ def csv_dataset(name, hi, events, args):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="hdphm bench prognostics", description=__doc__.split("\n")[0])
     ap.add_argument("--fleet", action="append", default=[], metavar="NAME=DIR", help="simulated fleet (repeatable)")
+    ap.add_argument("--events-fleet", action="append", default=[], metavar="NAME=DIR",
+                    help="fleet of bags with its own DIR/events.csv (e.g. the independent plant), repeatable")
     ap.add_argument("--dev", default=None, help="fleet NAME on which the degradation clock is chosen (ML)")
     ap.add_argument("--exposure", default=None, choices=("missions", "hours", "load"),
                     help="fix the clock instead of choosing it on --dev")
@@ -169,6 +216,11 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         results[n], exposure = sim_fleet(n, fleets[n], out, exposure, args)
         results[n]["seconds"] = time.perf_counter() - t0
+    for spec in args.events_fleet:
+        n, d = spec.split("=", 1)
+        t0 = time.perf_counter()
+        results[n] = events_fleet(n, d, exposure or "load", args)
+        results[n]["seconds"] = time.perf_counter() - t0
     if args.nasa:
         from hd_prognostic.realdata import battery_records, run_battery
 
@@ -193,19 +245,21 @@ def main(argv=None) -> int:
     table = {}
     for n, r in results.items():
         table[n] = {"life model": _row(r["life"]), "UKF on it": _row(r["ukf"]),
+                    "threshold bound": float(np.mean(list(r["bound"].values()))) if r.get("bound") else None,
                     "reference": _row(r.get("reference", [])), "exposure": r.get("exposure"),
                     "reference_name": r.get("reference_name"), "seconds": r.get("seconds")}
     (out / "bench_prognostics.json").write_text(json.dumps({"table": table, "results": results}, indent=1,
                                                            default=lambda o: float(o) if np.isscalar(o) else str(o)))
     print()
     print("| dataset | units scored | clock | life model: in-cone / P5-P95 cov / CRA / CRPS | UKF on it | "
-          "reference | reference model |")
-    print("|---|---|---|---|---|---|---|")
+          "reference | reference model | in-cone bound (true wear, population threshold) |")
+    print("|---|---|---|---|---|---|---|---|")
     for n, t in table.items():
         f = lambda r: (f"{r['frac_in_cone_lambda_ge_0.5']:.2f} / {r['coverage_p5_p95']:.2f} / {r['cra']:.2f} / "
                        f"{r['crps_mean']:.3g}" if r["n"] else "-")
         print(f"| {n} | {t['life model']['n']} | {t['exposure']} | {f(t['life model'])} | {f(t['UKF on it'])} | "
-              f"{f(t['reference'])} | {t['reference_name'] or '-'} |")
+              f"{f(t['reference'])} | {t['reference_name'] or '-'} | "
+              f"{'-' if t['threshold bound'] is None else format(t['threshold bound'], '.2f')} |")
     print(f"\nwrote {out}/bench_prognostics.json; {time.perf_counter() - t_all:.0f} s in all")
     return 0
 
