@@ -59,49 +59,164 @@ def sim_mission():
     return simulate_mission(None, None, "inspection", 3, duration=3.0)
 
 
-# --- plant2: the independently written EMA plant of tests/plants/ema2.py (issue 9) -----------------
+# ---------------------------------------------------------------------------------------------
+# Plant families (hd_sim.families, issue 9): structurally different plants, built once per run.
+# ---------------------------------------------------------------------------------------------
+#: The structurally different families every estimator test should also pass on (not ``default``).
+FAMILY_WORLD = ("smooth-cubic", "deadzone-lugre", "hysteretic-robot")
+
+
+class FamilyCase:
+    """Short missions of one actuator of a family: ``bags`` (paths), ``missions``, ``truths``, ``units``."""
+
+    def __init__(self, family, effect, bags, missions, truths, units):
+        self.family, self.effect = family, effect
+        self.bags, self.missions, self.truths, self.units = bags, missions, truths, units
+
+    def __repr__(self):
+        return f"FamilyCase({self.family!r}, effect={self.effect!r}, {len(self.bags)} bags)"
+
+
+def _family_case(root, family, effect=None, n_missions=4, duration=4.0, seed=0, preset="baseline"):
+    from hd_sim.families import write_family_case
+
+    out = root / f"{family}__{effect or 'clean'}__{n_missions}x{duration:g}s_s{seed}"
+    r = write_family_case(out, family, effect, n_missions=n_missions, duration=duration, seed=seed, preset=preset)
+    return FamilyCase(family, effect, r["bags"], r["missions"], r["truths"], [r["unit"]])
+
+
 @pytest.fixture(scope="session")
-def plant2_case_bags(tmp_path_factory):
-    """Factory ``plant2_case_bags(effect="clean") -> dict`` of the independent plant (tests/plants/ema2.py).
+def family_names():
+    """Names of the structurally different plant families (``FAMILY_WORLD``)."""
+    return FAMILY_WORLD
 
-    One actuator, four 12 s contract bags (the same four missions for every effect, seeds 0..3), one
-    undeclared effect (names: ``tests.plants.ema2.EFFECTS``). Keys: ``bags`` (4 paths), ``fit`` (first
-    three), ``held_out`` (the fourth), ``truth`` (effect, parameters, signal it shows in), ``truth_path``,
-    ``signals`` (simulated arrays incl. truth, for checks only). All effects are simulated in one batch on
-    first use (about 15 s on one core); each effect's bags are written when first asked for (about 5 s).
-    """
-    from tests.plants import ema2
 
-    root = tmp_path_factory.mktemp("plant2_cases")
-    state: dict = {}
+@pytest.fixture(scope="session")
+def family_case_bags(tmp_path_factory):
+    """Factory ``family_case_bags(family, effect=None, n_missions=4, duration=4.0, seed=0, preset="baseline")
+    -> FamilyCase``: one actuator of the family (its laws, gear ratio, sensors, log rate drawn, seeded) on
+    top of the preset, ``effect`` (a registry effect name, the undeclared one) switched on, ``n_missions``
+    missions cycling the family's test profiles, written as contract bags with ``/sim`` truth. Cached per
+    session: the same arguments return the same object."""
+    root = tmp_path_factory.mktemp("family_cases")
+    cache = {}
 
-    def make(effect: str = "clean") -> dict:
-        if effect not in ema2.EFFECTS:
-            raise ValueError(f"plant2: unknown effect {effect!r}; known: {', '.join(ema2.EFFECTS)}")
-        if "sigs" not in state:
-            state["sigs"] = ema2.simulate_cases()
-        if effect not in state:
-            state[effect] = ema2.write_case(root / effect, effect, sigs=state["sigs"][effect])
-        return state[effect]
+    def make(family, effect=None, n_missions=4, duration=4.0, seed=0, preset="baseline"):
+        key = (family, effect, int(n_missions), float(duration), int(seed), preset)
+        if key not in cache:
+            cache[key] = _family_case(root, *key)
+        return cache[key]
 
     return make
 
 
-@pytest.fixture(scope="session")
-def plant2_fleet(tmp_path_factory):
-    """A small run-to-failure fleet of the independent plant: ``{"dir", "events", "truth"}``.
+def _family_fleet(root, family, n_actuators=3, n_missions=12, duration=2.0, seed=0, mission_hours=1.2e4):
+    from hd_sim.fleet import simulate_fleet
 
-    4 units, at most 10 missions of 3 s each (nominal life 5 missions, unit scatter), inspections every
-    third mission. ``dir/EMA2-Uxx/mission_000.mcap`` ... (missions flown only), ``dir/events.csv``
-    (``actuator_id,mission_index,event,quantity,value``), ``dir/fleet_truth.json`` (true wear per mission,
-    thresholds, failure missions: scoring only).
-    """
+    out = root / f"{family}_{n_actuators}x{n_missions}_s{seed}"
+    s = simulate_fleet(n_actuators, n_missions, out, seed=seed, duration=duration, progress=False, family=family,
+                       sim_internal_every=0, overrides={"mission_hours": mission_hours})
+    write_failure_events(s, out / "events.csv")
+    return out
+
+
+def write_failure_events(summary, path):
+    """``events.csv`` (actuator_id,mission_index,event,quantity,value) of an hd_sim fleet: one ``failure`` row per
+    unit at its EOL mission (found failed at the start of it), as an operator's fleet records it."""
     import csv
 
-    from tests.plants import ema2
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["actuator_id", "mission_index", "event", "quantity", "value"])
+        for a in summary["actuators"]:
+            if a["eol_mission"] is not None:
+                w.writerow([a["actuator_id"], a["eol_mission"], "failure", "", ""])
 
-    out = tmp_path_factory.mktemp("plant2_fleet")
-    truth = ema2.fleet(out, units=4, missions=10, duration=3.0, seed=3, life_missions=5.0, inspect_every=3)
-    with open(out / "events.csv") as f:
-        events = list(csv.DictReader(f))
-    return {"dir": out, "events": events, "truth": truth}
+
+@pytest.fixture(scope="session")
+def family_fleet(tmp_path_factory):
+    """Factory ``family_fleet(family, n_actuators=3, n_missions=12, duration=2.0, seed=0, mission_hours=1.2e4)
+    -> Path``: a small run-to-failure fleet of the family (default realistic effects under the family's laws;
+    wear accelerated so units fail within ~12 missions), ``DIR/<actuator>/*.mcap`` + ``fleet_truth.json``
+    (per unit: ``family`` draws and laws, health per mission, ``eol_mission``) + ``events.csv`` (failures).
+    Cached per session."""
+    root = tmp_path_factory.mktemp("family_fleets")
+    cache = {}
+
+    def make(family, n_actuators=3, n_missions=12, duration=2.0, seed=0, mission_hours=1.2e4):
+        key = (family, int(n_actuators), int(n_missions), float(duration), int(seed), float(mission_hours))
+        if key not in cache:
+            cache[key] = _family_fleet(root, *key)
+        return cache[key]
+
+    return make
+
+
+# --- plant2: the independently written EMA plant of tests/plants/ema2.py (issue 9); fixtures live there
+from tests.plants.fixtures import plant2_case_bags, plant2_fleet  # noqa: E402,F401
+
+
+# --- every world at once: the hd_sim families + the independent plant2 ----------------------------------
+#: Worlds an estimator test should pass on: three structurally different hd_sim families + plant2.
+PLANT_WORLD = FAMILY_WORLD + ("plant2",)
+
+#: Where an hd_sim effect shows first (as tests.plants.ema2.EFFECT_SIGNAL does for plant2).
+_CATEGORY_SIGNAL = {"friction": "tau_m", "motor": "tau_m", "transmission": "Q_red", "load": "Q_red"}
+
+
+class World:
+    """One plant world with one interface, whatever wrote it (``plant_world`` fixture).
+
+    ``name`` (family name or ``"plant2"``), ``kind`` (``"hd_sim"`` | ``"plant2"``),
+    ``case(effect=None) -> dict`` with ``bags`` (4 paths), ``fit`` (first three), ``held_out`` (the fourth),
+    ``truth`` (``plant``, ``effect``, ``signal`` it shows in); ``effect`` is a name of ``effects`` (the
+    world's own vocabulary: hd_sim registry names, or ``tests.plants.ema2.EFFECTS``), None = clean.
+    ``fleet() -> dict`` with ``dir`` (one folder per unit), ``events`` (rows of ``dir/events.csv``:
+    failures; plant2 also inspections), ``truth`` (scoring only).
+    """
+
+    def __init__(self, name, request):
+        self.name = name
+        self.kind = "plant2" if name == "plant2" else "hd_sim"
+        self._request = request
+
+    @property
+    def effects(self):
+        if self.kind == "plant2":
+            from tests.plants import ema2
+
+            return tuple(e for e in ema2.EFFECTS if e != "clean")
+        from hd_sim.effects import REGISTRY
+
+        return tuple(n for n, e in REGISTRY.items() if not e.baseline and not e.slot and e.category in _CATEGORY_SIGNAL)
+
+    def case(self, effect=None):
+        if self.kind == "plant2":
+            return self._request.getfixturevalue("plant2_case_bags")(effect or "clean")
+        from hd_sim.effects import REGISTRY
+
+        c = self._request.getfixturevalue("family_case_bags")(self.name, effect)
+        sig = _CATEGORY_SIGNAL.get(REGISTRY[effect].category) if effect else None
+        return {"bags": list(c.bags), "fit": list(c.bags[:-1]), "held_out": c.bags[-1], "case": c,
+                "truth": {"plant": f"hd_sim family {self.name}", "effect": effect or "clean", "signal": sig}}
+
+    def fleet(self):
+        import csv
+        import json
+
+        if self.kind == "plant2":
+            return self._request.getfixturevalue("plant2_fleet")
+        d = self._request.getfixturevalue("family_fleet")(self.name)
+        with open(d / "events.csv") as f:
+            events = list(csv.DictReader(f))
+        return {"dir": d, "events": events, "truth": json.loads((d / "fleet_truth.json").read_text())}
+
+    def __repr__(self):
+        return f"World({self.name!r})"
+
+
+@pytest.fixture(scope="session", params=PLANT_WORLD)
+def plant_world(request):
+    """Parametrised over ``PLANT_WORLD`` (smooth-cubic, deadzone-lugre, hysteretic-robot, plant2): a
+    :class:`World`; its bags and fleets are built on first use and cached for the session."""
+    return World(request.param, request)

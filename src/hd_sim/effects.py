@@ -35,10 +35,11 @@ class Effect:
     default_on: bool
     baseline: bool
     params: Mapping[str, tuple[float, str, str]] = field(default_factory=dict)  # key -> (default, unit, doc)
+    slot: str = ""  # law slot (LAW_SLOTS) this effect is one choice of; "" = an independent effect
 
 
-def _E(name, category, doc, default_on, baseline, **params):
-    return Effect(name, category, doc, default_on, baseline, params)
+def _E(name, category, doc, default_on, baseline, slot="", **params):
+    return Effect(name, category, doc, default_on, baseline, params, slot)
 
 
 #: name -> Effect. Order = the order ``hdphm sim effects`` prints.
@@ -55,6 +56,21 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
        True, True,
        b=(2.0e-3, "N*m*s/rad", "input-side viscous coefficient at T_ref"),
        b_out=(20.0, "N*m*s/rad", "output-side viscous coefficient at T_ref")),
+    _E("smooth_friction", "friction",
+       "Law choice (slot friction_transition = tanh): Coulomb and Stribeck torques pass through zero speed as "
+       "tanh(omega_m/width) at the input and tanh(omega_f N/width) at the output, a width of the order of "
+       "real drives' measured transition (instead of the near-hard sign of eps_v = 0.02 rad/s).", False, False,
+       slot="friction_transition",
+       width=(1.0, "rad/s", "motor-speed width of the transition (0.2-5 rad/s); replaces coulomb_friction.eps_v")),
+    _E("lugre_friction", "friction",
+       "Law choice (slot friction_transition = lugre): LuGre dynamic friction (Canudas de Wit et al. 1995) on "
+       "the input Coulomb + Stribeck torque: dz/dt = omega_m - sigma0 |omega_m| z / g(omega_m), "
+       "T = sigma0 z + sigma1 dz/dt (+ viscous), g = T_C (+ Stribeck); pre-sliding spring sigma0 below "
+       "breakaway. The mesh flank friction and the output bearing keep tanh(omega/eps_v).", False, False,
+       slot="friction_transition",
+       sigma0=(2000.0, "N*m/rad", "bristle stiffness at the motor (pre-sliding travel T_C/sigma0 ~ 1e-3 rad)"),
+       sigma1=(0.02, "N*m*s/rad", "bristle damping"),
+       eps_v=(1.0, "rad/s", "tanh width of the mesh flank friction and the output bearing under this law")),
     _E("stribeck_friction", "friction",
        "(T_S - T_C) exp(-(|omega_m|/omega_s)^delta) sgn(omega_m) at the input.", True, False,
        ratio=(1.35, "-", "breakaway / Coulomb ratio T_S/T_C"),
@@ -82,11 +98,24 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
        mu_bb=(0.0015, "-", "equivalent WG ball-bearing friction coefficient")),
     # ---- transmission --------------------------------------------------------------------
     _E("nonlinear_stiffness", "transmission",
-       "Catalogue three-slope torsion law K1/K2/K3 (T1, T2) of the output, realised in the mesh spring; "
-       "off: linear mesh spring at the K3 slope.", True, False,
+       "Law choice (slot torsion = three_slope): catalogue three-slope torsion law K1/K2/K3 (T1, T2) of the "
+       "output, realised in the mesh spring; no torsion choice on: linear mesh spring at the K3 slope.", True, False,
+       slot="torsion",
        K1=(5.6e5, "N*m/rad", "output stiffness 0..T1"), K2=(9.2e5, "N*m/rad", "T1..T2"),
        K3=(1.0e6, "N*m/rad", "above T2 (also the linear stiffness of the baseline)"),
        T1=(245.0, "N*m", "first break torque"), T2=(900.0, "N*m", "second break torque")),
+    _E("cubic_stiffness", "transmission",
+       "Law choice (slot torsion = cubic): hardening mesh spring T = K1 w + K3c w^3 in the mesh twist w "
+       "(output rad), in series with the linear flexspline and WG-bearing compliances (their share "
+       "at nonlinear_stiffness.K3).", False, False, slot="torsion",
+       K1=(5.6e5, "N*m/rad", "output low-torque stiffness (as the catalogue K1)"),
+       K3c=(1.0e11, "N*m/rad^3", "cubic coefficient of the mesh spring (output angle)")),
+    _E("deadzone_stiffness", "transmission",
+       "Law choice (slot torsion = deadzone): linear torsion at K3 with a dead zone (lost motion) of total "
+       "width width_arcmin at the output, zero mesh force inside it (softplus corners of relative width "
+       "smooth); adds to the wear backlash.", False, False, slot="torsion",
+       width_arcmin=(1.0, "arcmin", "total dead-zone width at the output (lost motion)"),
+       smooth=(0.02, "-", "corner width / dead-zone width")),
     _E("hysteresis", "transmission",
        "Bouc-Wen (n = 1, beta = gamma) internal state z_h in F_FS; z_max solved so the zero-torque loop width "
        "at +-T_rated equals loss_arcmin at the output.", True, False,
@@ -153,10 +182,45 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
        sigma_i=(0.05, "A", "phase-current measurement"), sigma_Q=(3.0, "N*m", "output torque sensor"),
        sigma_omega_m=(0.02, "rad/s", "motor speed"), sigma_omega_f=(2e-4, "rad/s", "output speed"),
        sigma_T=(0.1, "K", "temperature sensors")),
+    _E("torque_sensor_bandwidth", "sensor",
+       "Output torque sensor with first-order dynamics: Q_meas' = 2 pi f_c (Q_red - Q_meas), before the noise.",
+       False, False, f_c=(200.0, "Hz", "sensor bandwidth")),
+    _E("drive_speed_estimate", "sensor",
+       "Logged speeds are the drive's own estimate, not the true speed: the quantised encoder angle "
+       "differentiated at the log rate and low-passed (first order), hence lagged and quantisation-noisy "
+       "(replaces sensor_noise's speed noise).", False, False,
+       f_c_m=(100.0, "Hz", "motor-speed estimator bandwidth"), f_c_f=(30.0, "Hz", "output-speed estimator bandwidth")),
+    _E("stamp_jitter", "sensor",
+       "Sample stamps carry timing jitter: header.stamp = t_k + e_k, e_k ~ N(0, sigma) clipped to +-0.45 "
+       "of the period (order kept); the signals are taken at the nominal instants.", False, False,
+       sigma=(5e-5, "s", "jitter standard deviation")),
     _E("dropouts", "sensor", "Missing joint-state samples (gaps) and NaN sensor faults.", False, False,
        rate=(0.5, "1/s", "gap starts per second"), mean_len=(5.0, "samples", "mean gap length"),
        nan_rate=(0.2, "1/s", "NaN burst starts per second"), nan_len=(3.0, "samples", "NaN burst length")),
 )}
+
+
+#: Law slots: slot -> choice -> effects it switches on. Choosing one switches every effect of the slot
+#: off first (``EffectSet.with_law``, CLI ``--law SLOT=CHOICE``); ``derived`` refuses two on at once.
+#: The hysteresis (Bouc-Wen) effect is independent of the torsion slot (the default plant has the
+#: three-slope curve *and* the hysteresis); the ``bouc_wen`` choice is the linear spring with it,
+#: ``linear`` the linear spring without it.
+LAW_SLOTS: dict[str, dict[str, tuple[str, ...]]] = {
+    "friction_transition": {"hard_sign": (), "tanh": ("smooth_friction",), "lugre": ("lugre_friction",)},
+    "torsion": {"three_slope": ("nonlinear_stiffness",), "linear": (), "cubic": ("cubic_stiffness",),
+                "deadzone": ("deadzone_stiffness",), "bouc_wen": ("hysteresis",)},
+}
+#: Docs of the implicit choices (no effect of the slot on).
+LAW_DOCS = {
+    ("friction_transition", "hard_sign"): "tanh(omega_m/coulomb_friction.eps_v), eps_v = 0.02 rad/s: a "
+                                          "near-hard sign (today's default)",
+    ("torsion", "linear"): "linear mesh spring at nonlinear_stiffness.K3",
+}
+
+
+def slot_members(slot: str) -> tuple[str, ...]:
+    """Effects that belong to a law slot (at most one may be on); ``hysteresis`` is not one of them."""
+    return tuple(n for n, e in REGISTRY.items() if e.slot == slot)
 
 
 def _parse_bool(text: str, where: str) -> bool:
@@ -224,6 +288,28 @@ class EffectSet:
             new.on[n] = value
         return new
 
+    def with_law(self, slot: str, choice: str) -> "EffectSet":
+        """Choose the law of ``slot`` (``LAW_SLOTS``): every effect of the slot off, the choice's on."""
+        if slot not in LAW_SLOTS:
+            raise KeyError(f"unknown law slot {slot!r}; slots: {sorted(LAW_SLOTS)}")
+        if choice not in LAW_SLOTS[slot]:
+            raise KeyError(f"law slot {slot!r} has no choice {choice!r}; choices: {sorted(LAW_SLOTS[slot])}")
+        new = self.with_off(*slot_members(slot))
+        if (slot, choice) == ("torsion", "linear"):  # a plain spring: no hysteresis either
+            new = new.with_off("hysteresis")
+        return new.with_on(*LAW_SLOTS[slot][choice])
+
+    def law(self, slot: str) -> str:
+        """The chosen law of ``slot`` (ValueError if two of its effects are on)."""
+        on = [n for n in slot_members(slot) if self.on[n]]
+        if len(on) > 1:
+            raise ValueError(f"law slot {slot}: effects {on} are all on; choose one (--law {slot}=CHOICE)")
+        if on:
+            return next(c for c, names in LAW_SLOTS[slot].items() if names and names[0] == on[0])
+        if slot == "torsion":
+            return "bouc_wen" if self.on["hysteresis"] else "linear"
+        return "hard_sign"
+
     def with_params(self, **kw: float) -> "EffectSet":
         """``with_params(**{"stribeck_friction.ratio": 1.5})``."""
         new = self.copy()
@@ -246,9 +332,18 @@ class EffectSet:
         self.params[name][key] = v
         self.overridden.add((name, key))
 
-    def apply_cli(self, effects: Iterable[str] = (), params: Iterable[str] = ()) -> "EffectSet":
-        """Apply ``NAME=on|off`` and ``NAME.KEY=VALUE`` strings (CLI syntax)."""
+    def apply_cli(self, effects: Iterable[str] = (), params: Iterable[str] = (),
+                  laws: Iterable[str] = ()) -> "EffectSet":
+        """Apply ``SLOT=CHOICE`` laws, then ``NAME=on|off`` and ``NAME.KEY=VALUE`` strings (CLI syntax)."""
         new = self.copy()
+        for s in laws:
+            slot, sep, choice = s.partition("=")
+            if not sep:
+                raise ValueError(f"--law {s!r}: expected SLOT=CHOICE ({_laws_hint()})")
+            try:
+                new = new.with_law(slot.strip(), choice.strip())
+            except KeyError as e:
+                raise KeyError(f"--law {s!r}: {e.args[0]}") from None
         for s in effects:
             n, sep, v = s.partition("=")
             if not sep:
@@ -278,9 +373,33 @@ class EffectSet:
         return "EffectSet(on=" + ",".join(n for n in REGISTRY if self.on[n]) + ")"
 
 
+def _laws_hint() -> str:
+    return "; ".join(f"{s}: {'|'.join(c)}" for s, c in LAW_SLOTS.items())
+
+
+def laws_table(markdown: bool = False) -> str:
+    """The law slots and their choices (first part of ``hdphm sim effects``)."""
+    lines = []
+    if markdown:
+        lines += ["| law slot | choice | effects switched on | law |", "|---|---|---|---|"]
+    else:
+        lines.append("Law slots (--law SLOT=CHOICE; a choice switches the slot's other effects off):")
+    for slot, choices in LAW_SLOTS.items():
+        for choice, names in choices.items():
+            doc = LAW_DOCS.get((slot, choice)) or "; ".join(REGISTRY[n].doc.split(": ", 1)[-1] for n in names)
+            if choice == "bouc_wen":
+                doc = "linear mesh spring + Bouc-Wen hysteresis (the hysteresis effect)"
+            if markdown:
+                doc = doc.replace("|", "\\|")
+                lines.append(f"| {slot} | `{choice}` | {', '.join(f'`{n}`' for n in names) or '-'} | {doc} |")
+            else:
+                lines.append(f"  {slot}={choice:12s} effects on: {','.join(names) or '-'}")
+    return "\n".join(lines)
+
+
 def effects_table(markdown: bool = False) -> str:
     """Human-readable listing of the registry (``hdphm sim effects``)."""
-    lines = []
+    lines = [laws_table(markdown), ""]
     if markdown:
         lines.append("| effect | category | default | baseline | parameters (default, unit) |")
         lines.append("|---|---|---|---|---|")
@@ -291,7 +410,7 @@ def effects_table(markdown: bool = False) -> str:
                          f"{'yes' if e.baseline else 'no'} | {ps} |")
         else:
             lines.append(f"{e.name:32s} {e.category:13s} default={'on ' if e.default_on else 'off'} "
-                         f"baseline={'yes' if e.baseline else 'no '}")
+                         f"baseline={'yes' if e.baseline else 'no '}" + (f" law slot={e.slot}" if e.slot else ""))
             lines.append(f"    {e.doc}")
             for k, v in e.params.items():
                 lines.append(f"    {e.name}.{k} = {v[0]:g} [{v[1]}]  {v[2]}")

@@ -78,7 +78,7 @@ def onset_fault(health: Mapping[str, float], effects: EffectSet, mission_index: 
 
 def simulate_life(params: Mapping[str, Any], n_missions: int, out_dir: str | os.PathLike | None = None, *,
                   effects: EffectSet | None = None, duration: float = 20.0, fs: float = 1000.0,
-                  seed: int = 0, profiles: Iterable[str] = PROFILE_MIX, n_sub: int = 40,
+                  seed: int = 0, profiles: Iterable[str] = PROFILE_MIX, n_sub: int | None = None,
                   stop_at_failure: bool = True, tick=None, sim_internal_every: int = 10) -> list[dict[str, Any]]:
     """One actuator's life; writes bags under ``out_dir/<actuator_id>/`` when given.
 
@@ -150,14 +150,17 @@ def _init_worker(q):
 
 def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike, *, seed: int = 0,
                    effects: EffectSet | None = None, duration: float = 20.0, fs: float = 1000.0,
-                   workers: int = 1, profiles: Iterable[str] = PROFILE_MIX, n_sub: int = 40,
+                   workers: int = 1, profiles: Iterable[str] | None = None, n_sub: int | None = None,
                    stop_at_failure: bool = True, progress: bool = True,
                    sim_internal_every: int = 10,
-                   overrides: Mapping[str, float] | None = None) -> dict[str, Any]:
+                   overrides: Mapping[str, float] | None = None, family: str | None = None) -> dict[str, Any]:
     """Simulate ``n_actuators`` lives of up to ``n_missions`` missions into ``out_dir``.
 
     ``overrides`` sets actuator parameters for every unit of the population
     (e.g. ``{"mission_hours": 400}`` for shorter lives), checked like any other.
+    ``family`` (``hd_sim.families``) draws each actuator's laws, gear ratio, sensors and log
+    rate on top of ``effects`` (seeded by ``seed``); ``None`` or ``"default"``: today's plant
+    (``fs`` for every unit). ``profiles`` default: the family's fleet profiles (inspection).
 
     Writes ``out_dir/<actuator_id>/<actuator_id>_mNNNN.mcap`` and
     ``out_dir/fleet_truth.json`` (ground truth per actuator: parameters, the
@@ -169,7 +172,13 @@ def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     effects = effects if effects is not None else EffectSet.default()
+    from .families import family_unit, get_family
+
+    fam = get_family(family or "default")
+    profiles = tuple(profiles) if profiles is not None else fam.fleet_profiles
     pop = sample_population(n_actuators, seed)
+    units = [family_unit(fam.name, p, effects, seed, fs=fs if fam.name == "default" else None) for p in pop]
+    pop = [u.params for u in units]
     if overrides:
         for p in pop:
             unknown = set(overrides) - set(p)
@@ -177,16 +186,16 @@ def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike
                 raise KeyError(f"unknown actuator parameter(s) {sorted(unknown)}; see hd_sim.params.NOMINAL")
             p.update({k: float(v) for k, v in overrides.items()})
             check_params(p)
-    kw = dict(effects=effects, duration=duration, fs=fs, seed=seed, profiles=tuple(profiles), n_sub=n_sub,
+    kw = dict(duration=duration, seed=seed, profiles=profiles, n_sub=n_sub,
               stop_at_failure=stop_at_failure, sim_internal_every=sim_internal_every)
-    jobs = [(p, n_missions, str(out), kw) for p in pop]
+    jobs = [(p, n_missions, str(out), dict(kw, effects=u.effects, fs=u.fs)) for p, u in zip(pop, units)]
     results: dict[str, list] = {}
     from tqdm import tqdm
 
     bar = tqdm(total=n_actuators * n_missions, unit="mission", desc="sim fleet", disable=not progress)
     if workers <= 1:
-        for params, n_m, od, _ in jobs:
-            results[params["actuator_id"]] = simulate_life(params, n_m, od, tick=lambda: bar.update(1), **kw)
+        for params, n_m, od, kw_u in jobs:
+            results[params["actuator_id"]] = simulate_life(params, n_m, od, tick=lambda: bar.update(1), **kw_u)
     else:
         import multiprocessing as mp
 
@@ -205,13 +214,15 @@ def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike
     bar.close()
     summary = {
         "seed": seed, "duration_s": duration, "fs": fs, "effects": effects.to_json_dict(),
+        **({"family": fam.name} if fam.name != "default" else {}),
         "actuators": [
             {"actuator_id": p["actuator_id"],
+             **({"family": u.truth(), "unit_effects": u.effects.to_json_dict()} if fam.name != "default" else {}),
              "params": {k: v for k, v in p.items() if k != "effect_scale"},
              "effect_scale": p.get("effect_scale", {}),
              "eol_mission": next((r["mission_index"] for r in results[p["actuator_id"]] if r["failed"]), None),
              "missions": results[p["actuator_id"]]}
-            for p in pop
+            for p, u in zip(pop, units)
         ],
     }
     with open(out / "fleet_truth.json", "w") as f:

@@ -91,6 +91,10 @@ KNAMES = (
     "C_w", "R_wh", "C_h", "R_ha", "heat_on",
     # mid-mission fault (hd_sim.plant.fault_vector): onset step, ramp steps, final multipliers
     "flt_n_on", "flt_n_ramp", "flt_fric", "flt_kFS", "flt_bwA", "flt_bwb",
+    # switchable laws (hd_sim.effects.LAW_SLOTS): friction transition 0 = tanh(omega/eps_v) (hard sign
+    # at the default eps_v, smooth at a wide one), 1 = LuGre (bristle stiffness/damping sigma0, sigma1);
+    # torsion 0 = three-slope/linear mesh_law, 1 = cubic mesh spring k_m1 u + k_cub u^3
+    "fric_law", "lg_sigma0", "lg_sigma1", "tors_law", "k_cub",
     # numerics
     "dt", "n_sub",
 )
@@ -98,7 +102,7 @@ KI = {n: i for i, n in enumerate(KNAMES)}
 
 #: Initial-state vector layout.
 SNAMES = ("theta_m", "omega_m", "x_FS", "x_FS_d", "y_FS", "y_FS_d", "theta_f", "omega_f", "z_h",
-          "i_d", "i_q", "T_w", "T_h", "I_w", "I_d", "I_q")
+          "i_d", "i_q", "T_w", "T_h", "I_w", "I_d", "I_q", "z_lg")
 SI = {n: i for i, n in enumerate(SNAMES)}
 
 #: Logged columns, one row per log sample (the /sim/internal names first).
@@ -111,6 +115,8 @@ OUT_NAMES = (
     "v_d", "v_q", "i_q_ref", "omega_m_ref",
     "W_in", "W_ext", "W_pos", "W_diss", "W_plus", "W_minus",
     "fault_active", "fault_phi",
+    # LuGre bristle state [rad at the motor] (0 under the tanh friction law)
+    "z_lg",
 )
 OI = {n: i for i, n in enumerate(OUT_NAMES)}
 
@@ -203,6 +209,11 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
     bw_A0 = bw_A; bw_beta0 = bw_beta; bw_gamma0 = bw_gamma
     T_C00 = T_C0; T_C_out00 = T_C_out0; b_in00 = b_in0; b_out00 = b_out0; mu_c0 = mu_c; mu_bb0 = mu_bb
     k_FS0 = k_FS
+    fric_law = P[K_fric_law]; lg_s0 = P[K_lg_sigma0]; lg_s1 = P[K_lg_sigma1]
+    tors_law = P[K_tors_law]; k_cub = P[K_k_cub]
+    lugre = fric_law > 0.5
+    cubic = tors_law > 0.5
+    g_lg = 1.0
     phi = 0.0; f_on = 0.0
     J_out = J_CS + J_L
     eps_vf = eps_v / N
@@ -210,7 +221,7 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
     th_m = x0[S_theta_m]; w_m = x0[S_omega_m]; x = x0[S_x_FS]; vx = x0[S_x_FS_d]
     y = x0[S_y_FS]; vy = x0[S_y_FS_d]; th_f = x0[S_theta_f]; w_f = x0[S_omega_f]; z = x0[S_z_h]
     i_d = x0[S_i_d]; i_q = x0[S_i_q]; T_w = x0[S_T_w]; T_h = x0[S_T_h]
-    I_w = x0[S_I_w]; I_d = x0[S_I_d]; I_q = x0[S_I_q]
+    I_w = x0[S_I_w]; I_d = x0[S_I_d]; I_q = x0[S_I_q]; z_lg = x0[S_z_lg]
 
     n_log = theta_ref.shape[0]
     W_in = 0.0; W_ext = 0.0; W_pos = 0.0; W_diss = 0.0; W_plus = 0.0; W_minus = 0.0
@@ -296,7 +307,10 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
             ks = km_scale
             if eps_s != 0.0:
                 ks = km_scale * (1.0 + eps_s * (c2 * math.cos(psi_s) - s2 * math.sin(psi_s)))
-            F_el = ks * mesh_law(ug, k1, k2, k3, u1, u2, nl_on)
+            if cubic:
+                F_el = ks * (k1 + k_cub * ug * ug) * ug
+            else:
+                F_el = ks * mesh_law(ug, k1, k2, k3, u1, u2, nl_on)
             F_my = F_el + c_m * dg * d_m_d
             sgn_m = math.tanh(w_m / eps_v)
             F_mx = mu_g * F_my + mu_c * abs(F_my) * sgn_m
@@ -326,6 +340,8 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
             fr = Tc
             if stribeck_on > 0.5:
                 fr += (T_S_ratio - 1.0) * Tc * math.exp(-(abs(w_m) / omega_s) ** delta_s)
+            if lugre:
+                g_lg = max(fr, 1e-9)  # LuGre steady-state sliding torque g(omega_m): Coulomb + Stribeck
             if F1 != 0.0:
                 fr += F1 * (sm * math.cos(rho1) + cm * math.sin(rho1))
             if F2 != 0.0:
@@ -336,7 +352,11 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
                 fr += F4 * (s4 * math.cos(rho4) + c4 * math.sin(rho4))
             if mu_bb != 0.0:
                 fr += mu_bb * r_b * abs(F_b)
-            T_fin = fr * sgn_m + b_in0 * fb * w_m
+            if lugre:
+                zd_lg = w_m - lg_s0 * abs(w_m) * z_lg / g_lg
+                T_fin = lg_s0 * z_lg + lg_s1 * zd_lg + (fr - g_lg) * sgn_m + b_in0 * fb * w_m
+            else:
+                T_fin = fr * sgn_m + b_in0 * fb * w_m
             sgn_f = math.tanh(w_f / eps_vf)
             T_fout = T_C_out0 * fc * sgn_f + b_out0 * fb * w_f
             T_ex = T_ext[k]
@@ -365,11 +385,15 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
                 o[O_i_q] = i_q; o[O_i_d] = i_d; o[O_T_w] = T_w; o[O_T_h] = T_h
                 o[O_x_FS_d] = vx; o[O_y_FS_d] = vy; o[O_z_h] = z; o[O_T_e] = T_e; o[O_T_cog] = T_cog
                 o[O_T_pos] = T_pos; o[O_T_ext] = T_ex; o[O_T_tr] = T_tr
-                o[O_k_m_eff] = ks * (k3 if nl_on < 0.5 else (k1 if abs(ug) <= u1 else (k2 if abs(ug) <= u2 else k3)))
+                if cubic:
+                    o[O_k_m_eff] = ks * (k1 + 3.0 * k_cub * ug * ug)
+                else:
+                    o[O_k_m_eff] = ks * (k3 if nl_on < 0.5 else (k1 if abs(ug) <= u1 else (k2 if abs(ug) <= u2 else k3)))
                 o[O_v_d] = v_d; o[O_v_q] = v_q; o[O_i_q_ref] = i_q_ref; o[O_omega_m_ref] = w_m_ref
                 o[O_W_in] = W_in; o[O_W_ext] = W_ext; o[O_W_pos] = W_pos; o[O_W_diss] = W_diss
                 o[O_W_plus] = W_plus; o[O_W_minus] = W_minus
                 o[O_fault_active] = f_on; o[O_fault_phi] = phi
+                o[O_z_lg] = z_lg
             # ---- power bookkeeping (energy balance, wear and heat) ---------------------------
             p_mesh_fric = mu_c * abs(F_my) * sgn_m * vx
             p_diss = (T_fin * w_m + T_fout * w_f + c_b * d_b_d * d_b_d + c_m * dg * d_m_d * d_m_d
@@ -409,6 +433,12 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
             # ---- mechanics (semi-implicit Euler) ---------------------------------------------
             if hyst_on > 0.5:
                 z += dt * (bw_A * vy - bw_beta * abs(vy) * z - bw_gamma * vy * abs(z))
+            if lugre:
+                # exact step of dz/dt = w - sigma0 |w| z / g for w, g frozen over dt (stable at any speed)
+                r_lg = lg_s0 * abs(w_m) / g_lg
+                if r_lg * dt > 1e-12:
+                    z_ss = math.copysign(g_lg / lg_s0, w_m)
+                    z_lg = z_ss + (z_lg - z_ss) * math.exp(-r_lg * dt)
             w_m += a_m * dt
             vx += a_x * dt
             vy += a_y * dt
@@ -428,7 +458,7 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
     xf[S_theta_m] = th_m; xf[S_omega_m] = w_m; xf[S_x_FS] = x; xf[S_x_FS_d] = vx
     xf[S_y_FS] = y; xf[S_y_FS_d] = vy; xf[S_theta_f] = th_f; xf[S_omega_f] = w_f; xf[S_z_h] = z
     xf[S_i_d] = i_d; xf[S_i_q] = i_q; xf[S_T_w] = T_w; xf[S_T_h] = T_h
-    xf[S_I_w] = I_w; xf[S_I_d] = I_d; xf[S_I_q] = I_q
+    xf[S_I_w] = I_w; xf[S_I_d] = I_d; xf[S_I_q] = I_q; xf[S_z_lg] = z_lg
     return xf
 
 

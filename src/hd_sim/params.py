@@ -181,9 +181,28 @@ def archard_increment(W: float, p: Mapping[str, Any], duration: float, lube_loss
     PHYSICS.md 4: h' = 2 f_WG k_D T/(r_m n_eff cos(alpha) b) with f_WG = |omega_m|/(2 pi), i.e.
     dh = k_D W / (pi r_m n_eff cos(alpha) b); times the acceleration factor, and x (1 + 4 s) under
     lubrication loss of severity s.
+
+    The sliding distance per tooth engagement scales with the tooth size (module 2 r_m / Z_FS), so
+    the increment carries ``module_factor(p)`` (1 for the nominal 200-tooth size-65 gear): at another
+    gear ratio (more, smaller teeth, more WG revolutions per output radian) the wear per output
+    motion at the same output torque stays the same.
     """
     denom = math.pi * p["r_m"] * p["n_eff"] * math.cos(p["alpha_p"]) * p["b_face"]
     if duration <= 0:
         raise ValueError(f"archard_increment: duration {duration} s <= 0")
     accel = p["mission_hours"] * 3600.0 / duration
-    return float(accel * p["k_D"] * (1.0 + 4.0 * lube_loss) * W / denom)
+    return float(accel * p["k_D"] * (1.0 + 4.0 * lube_loss) * W / denom * module_factor(p))
+
+
+def module_factor(p: Mapping[str, Any]) -> float:
+    """Tooth module relative to the nominal gear's (2 r_m / Z_FS over 2 * 0.0825 / 200)."""
+    f = (p["r_m"] / p["Z_FS"]) / (NOMINAL["r_m"][0] / NOMINAL["Z_FS"][0])
+    return 1.0 if abs(f - 1.0) < 1e-12 else f
+
+
+def teeth_for_ratio(N: int) -> tuple[int, int]:
+    """(Z_FS, Z_CS) of a cup-type gear with flexspline fixed, circular spline output: N = Z_CS/(Z_CS - Z_FS)."""
+    N = int(N)
+    if N < 30 or N > 320:
+        raise ValueError(f"gear ratio {N} outside the strain-wave range 30-320")
+    return 2 * N - 2, 2 * N

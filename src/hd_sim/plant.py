@@ -104,6 +104,18 @@ def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, 
     k_m = [1.0 / (r_m**2 * (1.0 / Ki - c_rest)) for Ki in (K1, K2, K3)]
     u1 = (T1 / r_m) / k_m[0]
     u2 = u1 + ((T2 - T1) / r_m) / k_m[1]
+    # ---- law slots (effects.LAW_SLOTS): one choice each ---------------------------------------
+    fric_choice = effects.law("friction_transition")
+    tors_choice = effects.law("torsion")
+    k_cub = 0.0
+    if tors_choice == "cubic":
+        K1c = effects.p("cubic_stiffness", "K1")
+        K3c = effects.p("cubic_stiffness", "K3c")
+        if not (K1c > 0 and 1.0 / K1c > c_rest and K3c >= 0):
+            raise ValueError(f"cubic_stiffness needs K1 > 0 below K3/(1 - split_mesh) and K3c >= 0 "
+                             f"(got K1={K1c:g}, K3c={K3c:g})")
+        k_m[0] = 1.0 / (r_m**2 * (1.0 / K1c - c_rest))  # mesh linear slope (kernel k_m1 under the cubic law)
+        k_cub = K3c / r_m**4  # F = k_cub u^3 [N, m] <=> T = K3c (u/r_m)^3 [N*m, rad]
     hp, hm = float(health.get("h_plus", 0.0)), float(health.get("h_minus", 0.0))
     for nm, v in (("h_plus", hp), ("h_minus", hm)):
         if not (math.isfinite(v) and 0.0 <= v < 5e-4):
@@ -128,6 +140,14 @@ def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, 
     if on("backlash"):
         j = max(0.0, (hp + hm - 2.0 * p["delta_0"]) if wear else 0.0) / math.cos(p["alpha_p"])
         j += effects.p("backlash", "j0")
+    w_bl = max(effects.p("backlash", "smooth") * j, 1e-9)
+    if tors_choice == "deadzone":
+        wdz = effects.p("deadzone_stiffness", "width_arcmin") * ARCMIN * r_m
+        if not (wdz >= 0 and effects.p("deadzone_stiffness", "smooth") > 0):
+            raise ValueError("deadzone_stiffness needs width_arcmin >= 0 and smooth > 0")
+        w_bl = max(effects.p("deadzone_stiffness", "smooth") * (j + wdz), 1e-9)
+    else:
+        wdz = 0.0
     # hysteresis: zero-torque loop width (output angle) at +-T_rated = loss_arcmin
     bw_A, z_max, bw_beta = bouc_wen_params(p, effects, k_FS_eff)
     bw_gamma = bw_beta
@@ -172,7 +192,7 @@ def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, 
         k_m1=k_m[0], k_m2=k_m[1], k_m3=k_m[2], u1=u1, u2=u2, km_scale=km_scale,
         nl_on=float(on("nonlinear_stiffness")),
         eps_s=effects.p("position_dependent_stiffness", "eps") if on("position_dependent_stiffness") else 0.0,
-        psi_s=p.get("psi_s", 0.0), j_bl=j, w_bl=max(effects.p("backlash", "smooth") * j, 1e-9),
+        psi_s=p.get("psi_s", 0.0), j_bl=j + wdz, w_bl=w_bl,
         bw_A=bw_A, bw_beta=bw_beta, bw_gamma=bw_gamma, hyst_on=float(on("hysteresis") and z_max > 0),
         mu_c=mu_c, A1=A1, A2=A2, A4=A4, psi1=p.get("psi1", 0.0), psi2=p.get("psi2", 0.0),
         psi4=p.get("psi4", 0.0), a_T=effects.p("kinematic_error_harmonic", "a_T"), T_rated=p["T_rated"],
@@ -185,7 +205,13 @@ def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, 
         nu_beta=effects.p("temperature_dependent_friction", "beta"),
         T_ref=effects.p("temperature_dependent_friction", "T_ref"),
         n_b=effects.p("temperature_dependent_friction", "n_b"), n_c=effects.p("temperature_dependent_friction", "n_c"),
-        tdf_on=float(on("temperature_dependent_friction")), eps_v=effects.p("coulomb_friction", "eps_v"),
+        tdf_on=float(on("temperature_dependent_friction")),
+        eps_v=(effects.p("smooth_friction", "width") if fric_choice == "tanh" else
+               effects.p("lugre_friction", "eps_v") if fric_choice == "lugre" else effects.p("coulomb_friction", "eps_v")),
+        fric_law=1.0 if fric_choice == "lugre" else 0.0,
+        lg_sigma0=effects.p("lugre_friction", "sigma0") if fric_choice == "lugre" else 0.0,
+        lg_sigma1=effects.p("lugre_friction", "sigma1") if fric_choice == "lugre" else 0.0,
+        tors_law=1.0 if tors_choice == "cubic" else 0.0, k_cub=k_cub,
         mu_bb=effects.p("bearing_load_friction", "mu_bb") * (1.0 + lube) if on("bearing_load_friction") else 0.0,
         P1=effects.p("position_periodic_torque", "P1") if on("position_periodic_torque") else 0.0,
         P2=effects.p("position_periodic_torque", "P2") if on("position_periodic_torque") else 0.0,
@@ -205,7 +231,7 @@ def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, 
         # reporting only
         k_t=p["k_t"], h=h, h_plus=hp, h_minus=hm, h_fail=h_fail, backlash_j=j, fs_loss=fs_loss, lube_loss=lube,
         k_m_eff=k_m[2] * km_scale, k_D=p["k_D"], z_max=z_max, t0=t0,
-        K1=K1, K2=K2, K3=K3, T1=T1, T2=T2,
+        K1=K1, K2=K2, K3=K3, T1=T1, T2=T2, friction_law=fric_choice, torsion_law=tors_choice,
         K_out_lin=1.0 / (1.0 / (k_m[2] * km_scale * r_m**2) + 1.0 / (k_FS_eff * r_m**2) + mu_g**2 / (k_b * r_m**2)),
     )
     return d
@@ -225,6 +251,11 @@ def kernel_vector(d: Mapping[str, float], p: Mapping[str, Any], fs: float, n_sub
         input_locked=float(input_locked), dt=dt, n_sub=float(n_sub),
         flt_n_on=-1.0, flt_n_ramp=1.0, flt_fric=1.0, flt_kFS=1.0, flt_bwA=1.0, flt_bwb=1.0,  # no fault
     )
+    if not (d["eps_v"] > 0 and d["lg_sigma0"] >= 0 and d["lg_sigma1"] >= 0):
+        raise ValueError(f"friction law: need eps_v/width > 0 and LuGre sigma0, sigma1 >= 0 (got eps_v "
+                         f"{d['eps_v']:g}, sigma0 {d['lg_sigma0']:g}, sigma1 {d['lg_sigma1']:g})")
+    if d["fric_law"] > 0.5 and not d["lg_sigma0"] > 0:
+        raise ValueError("lugre_friction.sigma0 must be > 0")
     v = np.empty(len(K.KNAMES))
     for name, i in K.KI.items():
         v[i] = ctrl[name] if name in ctrl else d[name]
@@ -322,7 +353,12 @@ def _mesh_inverse(F: float, P: np.ndarray) -> float:
     ks = P[g["km_scale"]]
     k1, k2, k3, u1, u2 = (P[g[n]] for n in ("k_m1", "k_m2", "k_m3", "u1", "u2"))
     f = abs(F) / ks
-    if P[g["nl_on"]] < 0.5:
+    if P[g["tors_law"]] > 0.5:  # cubic: k1 a + k_cub a^3 = f (monotone: Newton from the linear guess)
+        k1, kc = P[g["k_m1"]], P[g["k_cub"]]
+        a = f / k1
+        for _ in range(60):
+            a -= (k1 * a + kc * a**3 - f) / (k1 + 3.0 * kc * a * a)
+    elif P[g["nl_on"]] < 0.5:
         a = f / k3
     elif f <= k1 * u1:
         a = f / k1
@@ -368,6 +404,34 @@ def initial_state(P: np.ndarray, theta_f0: float, T_load0: float, T_w0: float, T
     return x0
 
 
+#: Internal step the plant is integrated with at any log rate (40 sub-steps at 1 kHz).
+DT_INTERNAL = 25e-6
+
+
+def default_n_sub(fs: float) -> int:
+    """Internal steps per log sample keeping dt = 25 us (the stiff internal modes need it): 40 at 1 kHz."""
+    return max(1, int(round(1.0 / (float(fs) * DT_INTERNAL))))
+
+
+def first_order_lowpass(x: np.ndarray, f_c: float, fs: float) -> np.ndarray:
+    """y' = 2 pi f_c (x - y) sampled at fs (exact for x held over each period), y[0] = x[0]."""
+    from scipy.signal import lfilter
+
+    if not (f_c > 0 and math.isfinite(f_c)):
+        raise ValueError(f"filter bandwidth f_c = {f_c!r} Hz must be > 0")
+    a = 1.0 - math.exp(-2.0 * math.pi * f_c / fs)
+    y, _ = lfilter([a], [1.0, a - 1.0], x, zi=[(1.0 - a) * x[0]])
+    return y
+
+
+def drive_speed(theta_q: np.ndarray, f_c: float, fs: float) -> np.ndarray:
+    """A drive's speed estimate: backward difference of the quantised angle, low-passed at f_c (lagged)."""
+    d = np.empty_like(theta_q)
+    d[1:] = np.diff(theta_q) * fs
+    d[0] = 0.0
+    return first_order_lowpass(d, f_c, fs)
+
+
 def _quantise(x: np.ndarray, q: float) -> np.ndarray:
     return q * np.floor(x / q + 0.5) if q > 0 else x
 
@@ -375,7 +439,7 @@ def _quantise(x: np.ndarray, q: float) -> np.ndarray:
 def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet | None = None,
                      profile: str | Profile = "inspection", seed: int = 0, *, duration: float = 20.0,
                      fs: float = 1000.0, health: Mapping[str, float] | None = None, mission_index: int = 0,
-                     operating_hours: float = 0.0, n_sub: int = 40, T_amb: float | None = None,
+                     operating_hours: float = 0.0, n_sub: int | None = None, T_amb: float | None = None,
                      input_locked: bool = False, T_ext: np.ndarray | None = None,
                      fault: Mapping[str, Any] | None = None,
                      ) -> tuple[Mission, dict[str, Any]]:
@@ -386,7 +450,8 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
     a kind from ``hd_sim.profiles.PROFILES`` or a :class:`Profile`; seed drives
     the profile, gusts and sensor noise; health: ``{h_plus, h_minus, fs_loss,
     lube_loss}`` at the mission start (default new); n_sub: internal steps per
-    log sample (dt = 1/(fs n_sub)); input_locked: WG held (static torsion
+    log sample (dt = 1/(fs n_sub); default ``default_n_sub(fs)``: dt = 25 us at any log
+    rate, 40 at 1 kHz); input_locked: WG held (static torsion
     tests); T_ext: optional extra hinge moment per log sample [N*m]; fault: a
     fault starting inside the mission, ``{"name": "lubrication_loss" |
     "flexspline_stiffness_loss", "severity": x, "t_onset": s[, "t_ramp": s]}``
@@ -402,6 +467,10 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
     params = dict(params) if params is not None else nominal()
     effects = effects if effects is not None else EffectSet.default()
     health = dict(new_health(), **(health or {}))
+    if not isinstance(profile, str):
+        fs = profile.fs
+    if n_sub is None:
+        n_sub = default_n_sub(fs)
     if not (1 <= int(n_sub) <= 1000):
         raise ValueError(f"n_sub = {n_sub} outside [1, 1000]")
     if isinstance(profile, str):
@@ -457,7 +526,13 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
     omega_m = col["omega_m"] + nz("sigma_omega_m", n)
     omega_f = col["omega_f"] + nz("sigma_omega_f", n)
     tau_m = k_t * (col["i_q"] + nz("sigma_i", n))
-    Q_red = col["Q_red"] + nz("sigma_Q", n)
+    Q_true = col["Q_red"]
+    if effects.is_on("torque_sensor_bandwidth"):
+        Q_true = first_order_lowpass(Q_true, effects.p("torque_sensor_bandwidth", "f_c"), fs)
+    Q_red = Q_true + nz("sigma_Q", n)
+    if effects.is_on("drive_speed_estimate"):
+        omega_m = drive_speed(theta_m, effects.p("drive_speed_estimate", "f_c_m"), fs)
+        omega_f = drive_speed(theta_f, effects.p("drive_speed_estimate", "f_c_f"), fs)
     dec = max(1, int(round(fs / 10.0)))
     t_T = t[::dec]
     temps = {}
@@ -465,6 +540,14 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
         v = col[key][::dec] + nz("sigma_T", len(t_T))
         temps[frame] = (t_T.copy(), np.round(v, 2))
     keep = np.ones(n, bool)
+    t_stamp = t
+    if effects.is_on("stamp_jitter"):
+        sj = effects.p("stamp_jitter", "sigma")
+        if not (0.0 <= sj and math.isfinite(sj)):
+            raise ValueError(f"stamp_jitter.sigma = {sj!r} s must be >= 0")
+        e = sj * np.random.default_rng([int(seed), 0x717E]).standard_normal(n)
+        e[0] = 0.0  # the first stamp stays at the mission start
+        t_stamp = t + np.clip(e, -0.45 / fs, 0.45 / fs)
     sig = {"theta_m": theta_m, "theta_f": theta_f, "omega_m": omega_m, "omega_f": omega_f,
            "tau_m": tau_m, "Q_red": Q_red}
     if effects.is_on("dropouts"):
@@ -486,7 +569,7 @@ def simulate_mission(params: Mapping[str, Any] | None = None, effects: EffectSet
         extra={"seed": str(seed), "profile": profile.kind, "simulator": "hd_sim",
                "T_amb": f"{T_amb_:.2f}", "frame_size": "65"},
     )
-    mission = Mission(meta=meta, t=t[keep], theta_m=sig["theta_m"][keep], theta_f=sig["theta_f"][keep],
+    mission = Mission(meta=meta, t=t_stamp[keep], theta_m=sig["theta_m"][keep], theta_f=sig["theta_f"][keep],
                       omega_m=sig["omega_m"][keep], omega_f=sig["omega_f"][keep], tau_m=sig["tau_m"][keep],
                       Q_red=sig["Q_red"][keep], t_cmd=t.copy(), theta_ref=profile.theta_ref.copy(),
                       temperatures=temps, t0_ns=0)

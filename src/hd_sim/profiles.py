@@ -6,7 +6,10 @@ Kinds: ``step`` (deploy/retract steps), ``ramp``, ``sine``, ``sweep`` (chirp
 0.2-2 Hz), ``gust`` (holds under strong gusts), ``flight`` (random flight-like
 mix of all), ``inspection`` (the standard manoeuvre every mission starts with:
 slow reversal ramp, a deploy/retract step pair and a short sine; then a random
-flight segment), ``hold``.
+flight segment), ``hold``; and three beyond our flap missions: ``constant_sweep`` (long
+constant-speed sweeps across the travel at a slow rate drawn per mission, 1-10 deg/s),
+``dither`` (small-stroke dither, +-0.05-0.5 deg at 1-6 Hz around a hold: friction transition
+and pre-sliding), ``parked`` (command fixed, the load held against gusts: no motion).
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from scipy import signal
 
 from .kernel import rate_limit
 
-PROFILES = ("inspection", "step", "ramp", "sine", "sweep", "gust", "flight", "hold")
+PROFILES = ("inspection", "step", "ramp", "sine", "sweep", "gust", "flight", "hold",
+            "constant_sweep", "dither", "parked")
 
 
 @dataclass
@@ -121,6 +125,26 @@ def make_profile(kind: str, duration: float, fs: float = 1000.0, seed: int = 0, 
         a = np.minimum(amp, 0.9 * rate / (2 * math.pi * finst))
         pos = a * np.sin(phase)
         vel = np.gradient(pos, 1.0 / fs)
+    elif kind == "constant_sweep":
+        v = rng.uniform(1.0, 10.0) * deg  # output rate of the sweep
+        period = 4.0 * amp / v
+        ph = (t / period + 0.25) % 1.0
+        target = amp * (1.0 - 4.0 * np.abs(ph - 0.5))  # triangle through 0 at t = 0, constant |rate| v
+        pos, vel = _shape(target, fs, rate, acc, 0.0)
+        info["rate_rad_s"] = v
+    elif kind == "dither":
+        a = rng.uniform(0.05, 0.5) * deg
+        f = rng.uniform(1.0, 6.0)
+        c = rng.uniform(-0.5, 0.5) * amp
+        t1 = np.maximum(t - 0.5, 0.0)  # 0.5 s move to the hold angle, then the dither fades in over 0.5 s
+        pos = (c * 0.5 * (1 - np.cos(math.pi * np.minimum(t / 0.5, 1.0)))
+               + a * np.minimum(t1 / 0.5, 1.0) * np.sin(2 * math.pi * f * t1))
+        vel = np.gradient(pos, 1.0 / fs)
+        info.update(dither_amp_rad=a, f_Hz=f)
+    elif kind == "parked":
+        target = np.full(n, rng.uniform(-0.5, 0.5) * amp)
+        pos, vel = target.copy(), np.zeros(n)
+        gust_level *= 2.0
     elif kind == "gust":
         target = steps(t, rng) * 0.6
         pos, vel = _shape(target, fs, rate, acc, x0)

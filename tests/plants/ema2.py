@@ -125,6 +125,15 @@ DEFAULT_INTERNAL_RATE = 4000.0
 DEFAULT_DURATION = 60.0
 
 
+def effect_spec(effect: str, params: dict | None = None) -> dict:
+    """The named effect's changed parameters with ``params`` overriding them (e.g. {"ripple_amp": 0.02})."""
+    if effect not in EFFECTS:
+        raise ValueError(f"ema2: unknown effect {effect!r}; known: {', '.join(EFFECTS)}")
+    spec = dict(EFFECTS[effect], **(params or {}))
+    effect_params(spec)  # checks the keys
+    return spec
+
+
 def effect_params(effect: str | dict) -> dict:
     """Full effect parameter set for a named effect (or a dict of overrides on 'clean')."""
     p = dict(EFFECT_PARAMS0)
@@ -151,11 +160,17 @@ def reference(duration: float, fs: float, rng: np.random.Generator, stroke: floa
     target = np.zeros(n)
     kinds = ["sines", "ramps", "steps", "hold", "dither"]
     i, x, order = int(0.5 * fs), 0.0, []
+    # the first three segments are sines, ramps and steps in random order, shortened so that all three fit
+    # into missions from 6 s on; then all five kinds in random order
+    first = min(4.5, max(1.0, (duration - 0.5) / 3.0))
+    k_seg = 0
     while i < n:
         if not order:
             order = list(rng.permutation(kinds[:3])) + list(rng.permutation(kinds))
         kind = order.pop(0)
-        L = min(n - i, int(rng.uniform(2.0, 4.5) * fs))
+        hi = first if k_seg < 3 else 4.5
+        L = min(n - i, int(rng.uniform(min(2.0, 0.7 * hi), hi) * fs))
+        k_seg += 1
         tt = np.arange(L) / fs
         if kind == "sines":
             k = rng.integers(2, 4)
@@ -284,7 +299,8 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
     dtJm, dtJf, NKp = dt / Jm, dt / Jf, N * Kp_x
     thm, thf, wm, wf = np.zeros(B), np.zeros(B), np.zeros(B), np.zeros(B)
     iq, integ, wm_est, thm_q_prev = np.zeros(B), np.zeros(B), np.zeros(B), np.zeros(B)
-    rec = {k: np.empty((n, B)) for k in ("thm_q", "thf_q", "wm_est", "wf", "iq", "Q", "twist")}
+    rec = {k: np.empty((n, B)) for k in ("thm_q", "thf_q", "wm_est", "wm", "wf", "iq", "Q", "twist")}
+    iq_all, Q_all = np.empty((n * dec, B)), np.empty((n * dec, B))  # every step: the sensors average these
     for j in range(n):
         thr_c = NKp * ref[j] + N * dref[j]
         bv, Tg = visc[j], gst[j]
@@ -309,9 +325,10 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
                 we = w
             k1e = k1 * (1.0 + eps_k * np.cos(2.0 * thm + ph_k)) if use_k else k1
             Q = (k1e + k3 * we * we) * we + ct * wd
+            iq_all[j * dec + s], Q_all[j * dec + s] = iq, Q
             if s == 0:
                 rec["thm_q"][j], rec["thf_q"][j], rec["wm_est"][j] = thm_q, thf_q, wm_est
-                rec["wf"][j], rec["iq"][j], rec["Q"][j], rec["twist"][j] = wf, iq, Q, w
+                rec["wm"][j], rec["wf"][j], rec["iq"][j], rec["Q"][j], rec["twist"][j] = wm, wf, iq, Q, w
             mag = Fc
             if use_s:
                 mag = mag + F_s * np.exp(-np.square(wm / v_s))
@@ -326,6 +343,15 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
             wf = wf + dtJf * (Q - Ka * thf - ca * wf - Tg)
             thm = thm + dt * wm
             thf = thf + dt * wf
+    # current and torque sensors: mean over the sample period centred on the sample instant (the drive
+    # oversamples and averages; instantaneous samples would alias the speed-loop chatter)
+    if dec > 1:
+        h = dec // 2
+        pad = lambda x: np.concatenate([np.repeat(x[:1], h, 0), x, np.repeat(x[-1:], dec - h, 0)])  # noqa: E731
+        iq_mean = pad(iq_all)[: n * dec].reshape(n, dec, B).mean(1)
+        Q_mean = pad(Q_all)[: n * dec].reshape(n, dec, B).mean(1)
+    else:
+        iq_mean, Q_mean = rec["iq"], rec["Q"]
     # output-side speed estimate of the drive, at the sample rate (filtered difference of the encoder)
     a_f = (1.0 / fs) / (g("tau_w") + 1.0 / fs)
     d_f = np.diff(rec["thf_q"], axis=0, prepend=rec["thf_q"][:1]) * fs
@@ -335,9 +361,9 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
     for b, m in enumerate(missions):
         r = np.random.default_rng([int(m["seed"]), 7])
         p = P[b]
-        i_meas = rec["iq"][:, b] + p["i_noise"] * r.standard_normal(n)
+        i_meas = iq_mean[:, b] + p["i_noise"] * r.standard_normal(n)
         i_meas = np.round(i_meas / p["i_lsb"]) * p["i_lsb"]
-        Qm = rec["Q"][:, b] + p["Q_noise"] * r.standard_normal(n)
+        Qm = Q_mean[:, b] + p["Q_noise"] * r.standard_normal(n)
         Qm = np.round(Qm / p["Q_lsb"]) * p["Q_lsb"]
         nT = int(duration * p["temp_rate"])
         idx = np.minimum((np.arange(nT) / p["temp_rate"] * fs).astype(int), n - 1)
@@ -349,6 +375,7 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
             "tau_m": p["k_t"] * i_meas, "Q_red": Qm, "theta_ref": ref[:, b],
             "t_temp": idx / fs, "temperature": np.round(Tm_ / p["temp_lsb"]) * p["temp_lsb"],
             "truth": {"Q": rec["Q"][:, b], "i_q": rec["iq"][:, b], "twist": rec["twist"][:, b],
+                      "omega_m": rec["wm"][:, b], "omega_f": rec["wf"][:, b],
                       "temperature": temp[:, b], "exposure": float(exposure[b]),
                       "plant": p, "effect": E[b], "wear": float(m.get("wear", 0.0)),
                       "dead_zone_total": float(bdz[b]), "k1_eff": float(k1[b]), "F_c_eff": float(Fc[b])},
@@ -466,23 +493,25 @@ def _jsonable(o):
 # case bags (one effect, several missions) and run-to-failure fleets
 # ---------------------------------------------------------------------------------------------
 
-CASE_DURATION = 12.0  # s per mission in the test cases (README: why this is enough)
+CASE_DURATION = 8.0  # s per mission in the test cases (README: why this is enough)
 CASE_MISSIONS = 4  # three to fit, the last held out
 
 
 def simulate_cases(effects=None, missions: int = CASE_MISSIONS, duration: float = CASE_DURATION, seed: int = 0,
-                   sample_rate: float = DEFAULT_SAMPLE_RATE, plant: dict | None = None) -> dict:
+                   sample_rate: float = DEFAULT_SAMPLE_RATE, plant: dict | None = None,
+                   params: dict | None = None) -> dict:
     """All cases in one batch: {effect: [signals of mission 0..missions-1]}; every case flies the same
     missions (seeds ``seed * 100 + i``), so cases differ only by their effect."""
     effects = list(EFFECTS) if effects is None else list(effects)
-    ms = [{"seed": seed * 100 + i, "effect": e, "plant": plant or {}} for e in effects for i in range(missions)]
+    ms = [{"seed": seed * 100 + i, "effect": effect_spec(e, params), "plant": plant or {}}
+          for e in effects for i in range(missions)]
     sigs = simulate(ms, duration=duration, sample_rate=sample_rate)
     return {e: sigs[k * missions:(k + 1) * missions] for k, e in enumerate(effects)}
 
 
 def write_case(out_dir: str | os.PathLike, effect: str = "clean", missions: int = CASE_MISSIONS,
                duration: float = CASE_DURATION, seed: int = 0, sample_rate: float = DEFAULT_SAMPLE_RATE,
-               plant: dict | None = None, sigs: list | None = None) -> dict:
+               plant: dict | None = None, sigs: list | None = None, params: dict | None = None) -> dict:
     """``missions`` bags of one unit with one effect; returns {bags, fit, held_out, truth, truth_path}.
 
     ``sigs``: signals from :func:`simulate_cases` (else simulated here). Bags are named
@@ -490,15 +519,16 @@ def write_case(out_dir: str | os.PathLike, effect: str = "clean", missions: int 
     """
     out_dir = Path(out_dir)
     if sigs is None:
-        sigs = simulate_cases([effect], missions, duration, seed, sample_rate, plant)[effect]
+        sigs = simulate_cases([effect], missions, duration, seed, sample_rate, plant, params)[effect]
     bags = []
     for i, s in enumerate(sigs):
         bags.append(write_bag(out_dir / f"mission_{i:02d}.mcap", s, actuator_id=f"EMA2-C{seed:03d}",
                               mission_index=i, operating_hours=i * duration / 3600.0,
                               start_ns=1_700_000_000_000_000_000 + i * 3600 * 10**9,
                               extra={"seed": seed * 100 + i, "profile": "ema2_mixed"}))
-    truth = {"plant": "tests.plants.ema2", "effect": effect, "effect_params": effect_params(effect),
-             "changed": EFFECTS[effect], "signal": EFFECT_SIGNAL[effect], "duration": duration,
+    spec = effect_spec(effect, params)
+    truth = {"plant": "tests.plants.ema2", "effect": effect, "effect_params": effect_params(spec),
+             "changed": spec, "signal": EFFECT_SIGNAL[effect], "duration": duration,
              "sample_rate": sample_rate, "bags": [b.name for b in bags], "fit": [b.name for b in bags[:-1]],
              "held_out": bags[-1].name, "base": dict(BASE, **(plant or {}))}
     tp = out_dir / "truth.json"
@@ -509,7 +539,8 @@ def write_case(out_dir: str | os.PathLike, effect: str = "clean", missions: int 
 
 def fleet(out_dir: str | os.PathLike, units: int = 6, missions: int = 30, duration: float = 20.0, seed: int = 0,
           life_missions: float = 15.0, effect: str = "clean", hours_per_mission: float = 100.0,
-          sample_rate: float = DEFAULT_SAMPLE_RATE, inspect_every: int = 0) -> dict:
+          sample_rate: float = DEFAULT_SAMPLE_RATE, inspect_every: int = 0, params: dict | None = None,
+          plant: dict | None = None) -> dict:
     """Run ``units`` actuators mission by mission until failure (or ``missions``); write bags and truth.
 
     Wear grows with the transmitted load x sliding of each mission (exposure = integral |Q omega_f| dt),
@@ -533,22 +564,24 @@ def fleet(out_dir: str | os.PathLike, units: int = 6, missions: int = 30, durati
     ids = [f"EMA2-U{u:02d}" for u in range(units)]
     rate = np.exp(W["rate_scatter"] * rng.standard_normal(units))
     thr = W["d_ref"] * np.exp(W["threshold_scatter"] * rng.standard_normal(units))
-    unit_plant = [{"k1": BASE["k1"] * float(np.exp(0.05 * rng.standard_normal())),
-                   "F_c": BASE["F_c"] * float(np.exp(0.1 * rng.standard_normal()))} for _ in range(units)]
+    base = dict(BASE, **(plant or {}))
+    unit_plant = [dict(plant or {}, k1=base["k1"] * float(np.exp(0.05 * rng.standard_normal())),
+                       F_c=base["F_c"] * float(np.exp(0.1 * rng.standard_normal()))) for _ in range(units)]
+    spec = effect_spec(effect, params)
     wear = np.zeros(units)
     hist = {i: [] for i in ids}
     failed = {}
     events = []
-    for m in range(missions):
+    for m in range(missions + 1):  # the check at index `missions` finds units that failed in the last one
         alive = [u for u in range(units) if ids[u] not in failed]
         for u in list(alive):
             if wear[u] >= thr[u]:
                 failed[ids[u]] = m
                 events.append((ids[u], m, "failure", "", ""))
                 alive.remove(u)
-        if not alive:
+        if not alive or m == missions:
             break
-        ms = [{"seed": seed * 100000 + u * 1000 + m, "effect": effect, "plant": unit_plant[u], "wear": wear[u]}
+        ms = [{"seed": seed * 100000 + u * 1000 + m, "effect": spec, "plant": unit_plant[u], "wear": wear[u]}
               for u in alive]
         sigs = simulate(ms, duration=duration, sample_rate=sample_rate)
         for u, s in zip(alive, sigs):
@@ -573,7 +606,7 @@ def fleet(out_dir: str | os.PathLike, units: int = 6, missions: int = 30, durati
         wr.writerow(["actuator_id", "mission_index", "event", "quantity", "value"])
         for row in sorted(events, key=lambda r: (r[0], r[1], r[2])):
             wr.writerow(row)
-    truth = {"plant": "tests.plants.ema2", "effect": effect, "effect_params": effect_params(effect),
+    truth = {"plant": "tests.plants.ema2", "effect": effect, "effect_params": effect_params(spec),
              "duration": duration, "sample_rate": sample_rate, "hours_per_mission": hours_per_mission,
              "life_missions_nominal": life_missions, "wear_law": W, "a_nom": a_nom,
              "units": [{"actuator_id": ids[u], "rate_factor": float(rate[u]), "threshold": float(thr[u]),
@@ -587,36 +620,46 @@ def fleet(out_dir: str | os.PathLike, units: int = 6, missions: int = 30, durati
 # CLI
 # ---------------------------------------------------------------------------------------------
 
+def _kv(items: list[str], known: dict, what: str) -> dict:
+    out = {}
+    for it in items or []:
+        k, sep, v = it.partition("=")
+        if not sep or k not in known:
+            raise SystemExit(f"ema2: bad {what} {it!r}: use KEY=VALUE with KEY one of {', '.join(known)}")
+        out[k] = float(v)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m tests.plants.ema2", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
+
+    def common(q, duration):
+        q.add_argument("--effect", default="clean", choices=list(EFFECTS))
+        q.add_argument("--out", required=True)
+        q.add_argument("--duration", type=float, default=duration, help=f"s per mission (default {duration:g})")
+        q.add_argument("--seed", type=int, default=0)
+        q.add_argument("--rate", type=float, default=DEFAULT_SAMPLE_RATE, help="sample rate, Hz (default 1000)")
+        q.add_argument("--gear-ratio", type=float, default=BASE["N"])
+        q.add_argument("--param", action="append", metavar="KEY=VALUE",
+                       help="override an effect parameter (repeatable), e.g. ripple_amp=0.02")
+        q.add_argument("--plant", action="append", metavar="KEY=VALUE",
+                       help="override a base-plant parameter (repeatable), e.g. v_t=0.5")
+
     p = sub.add_parser("mission", help="one mission bag")
-    p.add_argument("--effect", default="clean", choices=list(EFFECTS))
-    p.add_argument("--out", required=True)
-    p.add_argument("--duration", type=float, default=DEFAULT_DURATION)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--rate", type=float, default=DEFAULT_SAMPLE_RATE, help="sample rate, Hz")
-    p.add_argument("--gear-ratio", type=float, default=BASE["N"])
+    common(p, DEFAULT_DURATION)
     p.add_argument("--wear-um", type=float, default=0.0)
     p.add_argument("--truth", help="also write the truth JSON here")
     c = sub.add_parser("case", help="several missions of one effect (fit + held-out) into a folder")
-    c.add_argument("--effect", default="clean", choices=list(EFFECTS))
-    c.add_argument("--out", required=True)
+    common(c, DEFAULT_DURATION)
     c.add_argument("--missions", type=int, default=CASE_MISSIONS)
-    c.add_argument("--duration", type=float, default=DEFAULT_DURATION)
-    c.add_argument("--seed", type=int, default=0)
-    c.add_argument("--rate", type=float, default=DEFAULT_SAMPLE_RATE)
     f = sub.add_parser("fleet", help="run-to-failure fleet: bags, events.csv, fleet_truth.json")
+    common(f, 20.0)
     f.add_argument("--units", type=int, default=6)
-    f.add_argument("--missions", type=int, default=30)
-    f.add_argument("--out", required=True)
-    f.add_argument("--duration", type=float, default=20.0)
-    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--missions", type=int, default=30, help="most missions per unit")
     f.add_argument("--life", type=float, default=15.0, help="nominal missions to failure")
-    f.add_argument("--effect", default="clean", choices=list(EFFECTS))
     f.add_argument("--hours-per-mission", type=float, default=100.0)
-    f.add_argument("--inspect-every", type=int, default=0)
-    f.add_argument("--rate", type=float, default=DEFAULT_SAMPLE_RATE)
+    f.add_argument("--inspect-every", type=int, default=0, help="inspection rows every K missions (0: none)")
     sub.add_parser("effects", help="list the effects and their parameters")
     a = ap.parse_args(argv)
     t0 = time.time()
@@ -624,8 +667,11 @@ def main(argv=None) -> int:
         for k, v in EFFECTS.items():
             print(f"{k:24s} {EFFECT_SIGNAL[k] or '-':6s} {json.dumps(v)}")
         return 0
+    params = _kv(a.param, EFFECT_PARAMS0, "--param")
+    plant = dict(_kv(a.plant, BASE, "--plant"), N=a.gear_ratio)
     if a.cmd == "mission":
-        s = simulate([{"seed": a.seed, "effect": a.effect, "plant": {"N": a.gear_ratio}, "wear": a.wear_um * 1e-6}],
+        spec = effect_spec(a.effect, params)
+        s = simulate([{"seed": a.seed, "effect": spec, "plant": plant, "wear": a.wear_um * 1e-6}],
                      duration=a.duration, sample_rate=a.rate)[0]
         write_bag(a.out, s, actuator_id="EMA2-0001", extra={"seed": a.seed})
         if a.truth:
@@ -633,11 +679,11 @@ def main(argv=None) -> int:
             Path(a.truth).write_text(json.dumps(_jsonable(dict(tr, effect_name=a.effect)), indent=1))
         print(f"wrote {a.out} ({a.duration:g} s, effect {a.effect}) in {time.time() - t0:.1f} s")
     elif a.cmd == "case":
-        r = write_case(a.out, a.effect, a.missions, a.duration, a.seed, a.rate)
+        r = write_case(a.out, a.effect, a.missions, a.duration, a.seed, a.rate, plant=plant, params=params)
         print(f"wrote {len(r['bags'])} bags + {r['truth_path']} in {time.time() - t0:.1f} s")
     else:
         tr = fleet(a.out, a.units, a.missions, a.duration, a.seed, a.life, a.effect, a.hours_per_mission,
-                   a.rate, a.inspect_every)
+                   a.rate, a.inspect_every, params=params, plant=plant)
         fm = [u["failure_mission"] for u in tr["units"]]
         print(f"wrote fleet to {a.out}: failure missions {fm} in {time.time() - t0:.1f} s")
     return 0

@@ -15,8 +15,13 @@ OWNED = {
     "load_dependent_friction": {"mu_c"},
     "position_periodic_friction": {"F1", "F2", "F3", "F4"},
     "bearing_load_friction": {"mu_bb"},
-    "nonlinear_stiffness": {"nl_on"},
-    "hysteresis": {"hyst_on", "z_max", "bw_beta", "bw_gamma"},
+    "nonlinear_stiffness": {"nl_on", "torsion_law"},
+    "hysteresis": {"hyst_on", "z_max", "bw_beta", "bw_gamma", "torsion_law"},
+    # law choices (hd_sim.effects.LAW_SLOTS)
+    "smooth_friction": {"eps_v", "friction_law"},
+    "lugre_friction": {"eps_v", "fric_law", "lg_sigma0", "lg_sigma1", "friction_law"},
+    "cubic_stiffness": {"k_m1", "tors_law", "k_cub", "torsion_law"},
+    "deadzone_stiffness": {"j_bl", "w_bl", "torsion_law"},
     "kinematic_error_harmonic": {"A1", "A2", "A4", "B1", "B2"},
     "position_dependent_stiffness": {"eps_s"},
     "cogging_torque": {"C1", "C2"},
@@ -31,7 +36,7 @@ OWNED = {
 
 def test_every_non_baseline_effect_is_listed_and_switchable():
     non_base = {n for n, e in REGISTRY.items() if not e.baseline}
-    sensor_or_fault = {"dropouts"}
+    sensor_or_fault = {"dropouts", "torque_sensor_bandwidth", "drive_speed_estimate", "stamp_jitter"}
     assert non_base - sensor_or_fault == set(OWNED)
     base = EffectSet.baseline()
     assert base.is_on("coulomb_friction") and base.is_on("viscous_friction")
