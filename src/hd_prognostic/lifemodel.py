@@ -493,7 +493,7 @@ class LifeModel:
     # ---- fit
     @classmethod
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
-            time_unit: str = "mission", maxiter: int = 4000, progress: bool = False) -> "LifeModel":
+            time_unit: str = "mission", maxiter: int = 600, progress: bool = False) -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring."""
         units = [u for u in units if len(u.t) >= 2 and np.isfinite(u.y).sum() >= 2]
         if len(units) < 2:
@@ -570,16 +570,17 @@ class LifeModel:
             return -float(lm.sum())
 
         xs0 = x0 / scale
-        r = optimize.minimize(nll, xs0, method="Nelder-Mead",
-                              options={"maxiter": maxiter, "maxfev": maxiter * 2, "xatol": 1e-4, "fatol": 1e-3,
-                                       "adaptive": True})
-        r2 = optimize.minimize(nll, r.x, method="Nelder-Mead",  # restart: Nelder-Mead stalls in 8+ dimensions
-                               options={"maxiter": maxiter, "maxfev": maxiter * 2, "xatol": 1e-5, "fatol": 1e-4,
+        # quasi-Newton first (finite-difference gradients of a smooth quadrature), then a Nelder-Mead polish
+        # (robust where the adaptive grid makes the finite differences noisy)
+        r = optimize.minimize(nll, xs0, method="L-BFGS-B", options={"maxiter": 300, "eps": 1e-6})
+        x1 = r.x if np.isfinite(r.fun) and r.fun < nll(xs0) else xs0
+        r2 = optimize.minimize(nll, x1, method="Nelder-Mead",
+                               options={"maxiter": maxiter, "maxfev": maxiter, "xatol": 1e-4, "fatol": 1e-3,
                                         "adaptive": True})
         th, ins = unpack(r2.x)
         info = {"n_units": len(units), "n_failures": nfail, "n_censored": len(units) - nfail,
                 "n_records": int(sum(np.isfinite(u.y).sum() for u in units)), "log_likelihood": float(-r2.fun),
-                "n_params": len(keys), "nelder_mead_evals": int(r.nfev + r2.nfev), "converged": bool(r2.success),
+                "n_params": len(keys), "evals": [int(r.nfev), int(r2.nfev)], "lbfgs_loglik": float(-r.fun), "converged": bool(r2.success),
                 "start": theta0, "notes": notes, "units": [u.unit for u in units],
                 "rate_median": float(np.nanmedian([u.rate() for u in units])),
                 "hours_per_step": (float(np.median(hp)) if (hp := [u.hours_per_step for u in units
