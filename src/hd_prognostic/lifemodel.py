@@ -285,7 +285,7 @@ class _Batch:
     def __init__(self, units: list[UnitHistory], E_ref: float, censor_at: list | None = None,
                  quantities: list[str] | None = None):
         self.U = len(units)
-        idx, ys, lx = [], [], []
+        idx, ys, lx, link = [], [], [], []
         self.llo, self.lhi, self.lcens = (np.full(self.U, np.nan) for _ in range(3))
         qi, qu, qx, qv = [], [], [], []
         qs = {q: j for j, q in enumerate(quantities or [])}
@@ -293,6 +293,9 @@ class _Batch:
             ok = np.isfinite(u.y)
             idx.append(np.full(int(ok.sum()), i))
             ys.append(u.y[ok])
+            # AR(1) residual chain: a record continues the chain when the record before it is finite
+            prev_ok = np.concatenate([[False], ok[:-1]])
+            link.append(prev_ok[ok])
             with np.errstate(divide="ignore"):
                 lx.append(np.log(np.maximum(u.E[ok], 0.0) / E_ref))
             for t, q, v in u.events.inspections:
@@ -318,40 +321,54 @@ class _Batch:
         self.idx = np.concatenate(idx).astype(int)
         self.y = np.concatenate(ys)
         self.lx = np.concatenate(lx)
+        self.link = np.concatenate(link).astype(bool)
         self.n = np.bincount(self.idx, minlength=self.U).astype(float)
-        self.Sy = np.bincount(self.idx, self.y, self.U)
-        self.Syy = np.bincount(self.idx, self.y * self.y, self.U)
+        self.n_start = np.bincount(self.idx, (~self.link).astype(float), self.U)  # chain starts per unit
         self.qi, self.qu = np.array(qi, int), np.array(qu, int)
         self.qx, self.qv = np.array(qx, float), np.array(qv, float)
         self.quantities = list(quantities or [])
         self._b = None
 
-    def set_b(self, b: float) -> None:
-        if b == self._b:
+    def set_b(self, b: float, rho: float = 0.0) -> None:
+        """Sufficient statistics of the prewhitened series (AR(1) residuals with coefficient rho):
+        u_j = y_j - rho y_{j-1}, offset regressor g_j = 1 - rho, latent regressor X_j - rho X_{j-1}; at a
+        chain start sqrt(1 - rho^2) times y_j, 1, X_j."""
+        if (b, rho) == self._b:
             return
         X = np.exp(b * self.lx)
-        self.SX = np.bincount(self.idx, X, self.U)
-        self.SXX = np.bincount(self.idx, X * X, self.U)
-        self.SyX = np.bincount(self.idx, self.y * X, self.U)
+        k0 = math.sqrt(1.0 - rho * rho)
+        L = self.link
+        yp = np.concatenate([[0.0], self.y[:-1]])
+        Xp = np.concatenate([[0.0], X[:-1]])
+        u = np.where(L, self.y - rho * yp, k0 * self.y)
+        xt = np.where(L, X - rho * Xp, k0 * X)
+        g = np.where(L, 1.0 - rho, k0)
+        bc = lambda w: np.bincount(self.idx, w, self.U)  # noqa: E731
+        self.Sgg, self.Sgu, self.SgX = bc(g * g), bc(g * u), bc(g * xt)
+        self.Suu, self.SuX, self.SXX = bc(u * u), bc(u * xt), bc(xt * xt)
         self.qX = np.exp(b * self.qx)
-        self._b = b
+        self.rho = rho
+        self._b = (b, rho)
 
     def logf(self, z: np.ndarray, th: dict, b: float, insp: dict) -> np.ndarray:
         """log of prior(z) p(y|z) p(insp|z) P(event|z), z of shape (U, n)."""
-        self.set_b(b)
+        rho = math.tanh(th.get("atanh_rho", 0.0))
+        self.set_b(b, rho)
         s, sa, sig, sD = (math.exp(th[k]) for k in ("log_s", "log_sa", "log_sigma", "log_sD"))
         mu, c, a0 = th["mu"], th["c"], th["a0"]
         r = np.exp(z)
         f = -0.5 * ((z - mu) / s) ** 2 - math.log(s) - 0.5 * _LOG2PI
         n = self.n[:, None]
-        Su = (self.Sy - self.n * a0)[:, None]
-        Suu = (self.Syy - 2 * a0 * self.Sy + self.n * a0 * a0)[:, None]
-        SuX = (self.SyX - a0 * self.SX)[:, None]
-        Se = Su - c * r * self.SX[:, None]
-        See = Suu - 2 * c * r * SuX + c * c * r * r * self.SXX[:, None]
+        # residual e = u - a0 g - c r x~ of the prewhitened series; offset a - a0 ~ N(0, s_a^2) marginalised
+        Sge = (self.Sgu - a0 * self.Sgg)[:, None] - c * r * self.SgX[:, None]
+        Sw = (self.Suu - 2 * a0 * self.Sgu + a0 * a0 * self.Sgg)[:, None]
+        Swx = (self.SuX - a0 * self.SgX)[:, None]
+        See = Sw - 2 * c * r * Swx + c * c * r * r * self.SXX[:, None]
         v2 = sig * sig
-        f = f - 0.5 * n * (_LOG2PI + math.log(v2)) - 0.5 * np.log1p(n * sa * sa / v2) \
-            - 0.5 / v2 * (See - sa * sa / (v2 + n * sa * sa) * Se * Se)
+        Sgg = self.Sgg[:, None]
+        f = f - 0.5 * n * (_LOG2PI + math.log(v2)) - 0.5 * np.log1p(Sgg * sa * sa / v2) \
+            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge) \
+            + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho)  # Jacobian of the chain starts
         for j, q in enumerate(self.quantities):
             m = insp.get(q)
             sel = self.qi == j
@@ -420,7 +437,7 @@ class _SubBatch(_Batch):
 
     def __init__(self, base: _Batch, rows: np.ndarray):  # noqa: D401 - light view, no parent __init__
         self.U = len(rows)
-        self.n, self.Sy, self.Syy = base.n[rows], base.Sy[rows], base.Syy[rows]
+        self.n, self.n_start = base.n[rows], base.n_start[rows]
         self._base, self._rows = base, rows
         self.llo, self.lhi, self.lcens = base.llo[rows], base.lhi[rows], base.lcens[rows]
         self.quantities = base.quantities
@@ -430,17 +447,19 @@ class _SubBatch(_Batch):
         self.qi, self.qu, self.qx, self.qv = base.qi[m], pos[base.qu[m]], base.qx[m], base.qv[m]
         self._b = None
 
-    def set_b(self, b: float) -> None:
-        self._base.set_b(b)
+    def set_b(self, b: float, rho: float = 0.0) -> None:
+        B = self._base
+        B.set_b(b, rho)
         r = self._rows
-        self.SX, self.SXX, self.SyX = self._base.SX[r], self._base.SXX[r], self._base.SyX[r]
+        self.Sgg, self.Sgu, self.SgX = B.Sgg[r], B.Sgu[r], B.SgX[r]
+        self.Suu, self.SuX, self.SXX = B.Suu[r], B.SuX[r], B.SXX[r]
         self.qX = np.exp(b * self.qx)
 
 
 class LifeModel:
     """Fitted population parameters + the prognosis on one unit (see the module docstring)."""
 
-    PARAMS = ("mu", "log_s", "log_b", "c", "a0", "log_sa", "log_sigma", "log_sD")
+    PARAMS = ("mu", "log_s", "log_b", "c", "a0", "log_sa", "log_sigma", "log_sD", "atanh_rho")
 
     def __init__(self, theta: dict, E_ref: float, exposure: str = "missions", feature: str = "hi",
                  inspections: dict | None = None, fit_info: dict | None = None, time_unit: str = "mission"):
@@ -465,7 +484,8 @@ class LifeModel:
                           "shape_b": self.b, "hi_change_at_median_threshold": self.theta["c"],
                           "hi_offset_mean": self.theta["a0"], "hi_offset_std": math.exp(self.theta["log_sa"]),
                           "hi_noise_std": math.exp(self.theta["log_sigma"]),
-                          "threshold_log_std": math.exp(self.theta["log_sD"])}}
+                          "threshold_log_std": math.exp(self.theta["log_sD"]),
+                          "hi_noise_ar1": math.tanh(self.theta.get("atanh_rho", 0.0))}}
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
             Path(path).write_text(json.dumps(d, indent=1, default=float))
@@ -506,7 +526,7 @@ class LifeModel:
         ends = [u.exposure_at(u.events.failure) if u.events.failure is not None else u.E[-1] for u in units]
         E_ref = float(np.median([e for e in ends if e > 0]))
         # start: per-unit least squares y = a_i + m_i X (b = 1)
-        m_i, a_i, res, cf = [], [], [], []
+        m_i, a_i, res, cf, ac = [], [], [], [], []
         for u, e in zip(units, ends):
             ok = np.isfinite(u.y)
             X = u.E[ok] / E_ref
@@ -515,6 +535,8 @@ class LifeModel:
             a_i.append(coef[0])
             m_i.append(coef[1])
             res.append(u.y[ok] - A @ coef)
+            if len(res[-1]) > 3 and np.std(res[-1]) > 0:
+                ac.append(float(np.corrcoef(res[-1][:-1], res[-1][1:])[0, 1]))
             if u.events.failure is not None:
                 cf.append(coef[1] * e / E_ref)
         c0 = float(np.median(cf))
@@ -525,7 +547,8 @@ class LifeModel:
         sig0 = float(np.std(np.concatenate(res))) or 1e-6
         theta0 = {"mu": float(np.mean(lr)), "log_s": math.log(max(float(np.std(lr)), 0.05)), "log_b": 0.0,
                   "c": c0, "a0": float(np.mean(a_i)), "log_sa": math.log(max(float(np.std(a_i)), 0.1 * sig0)),
-                  "log_sigma": math.log(sig0), "log_sD": math.log(0.2)}
+                  "log_sigma": math.log(sig0), "log_sD": math.log(0.2),
+                  "atanh_rho": math.atanh(float(np.clip(np.median(ac) if ac else 0.0, -0.9, 0.9)))}
         # inspection maps: quantities with enough inspections
         by_q: dict[str, int] = {}
         for u in units:
@@ -545,14 +568,15 @@ class LifeModel:
             insp0[q] = {"alpha": float(coef[0]), "beta": float(coef[1]), "log_tau": math.log(sd)}
         keys = list(cls.PARAMS) + [f"{q}|{k}" for q in qs for k in ("alpha", "beta", "log_tau")]
         x0 = np.array([theta0[k] for k in cls.PARAMS] + [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")])
-        scale = np.array([1.0, 1.0, 1.0, abs(c0), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, 1.0]
+        scale = np.array([1.0, 1.0, 1.0, abs(c0), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, 1.0, 1.0]
                          + [max(abs(insp0[q][k]), 1e-9) if k != "log_tau" else 1.0
                             for q in qs for k in ("alpha", "beta", "log_tau")])
 
         def unpack(x):
             x = x * scale
-            th = dict(zip(cls.PARAMS, x[:8]))
-            ins = {q: {k: float(x[8 + 3 * j + i]) for i, k in enumerate(("alpha", "beta", "log_tau"))}
+            npar = len(cls.PARAMS)
+            th = dict(zip(cls.PARAMS, x[:npar]))
+            ins = {q: {k: float(x[npar + 3 * j + i]) for i, k in enumerate(("alpha", "beta", "log_tau"))}
                    for j, q in enumerate(qs)}
             return th, ins
 
@@ -561,7 +585,8 @@ class LifeModel:
 
         def nll(xs):
             th, ins = unpack(xs)
-            if not (-6 < th["log_b"] < 2.5 and -9 < th["log_sD"] < 2 and -9 < th["log_s"] < 3):
+            if not (-6 < th["log_b"] < 2.5 and -9 < th["log_sD"] < 2 and -9 < th["log_s"] < 3
+                    and abs(th["atanh_rho"]) < 3.0):
                 return 1e30
             z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=windows)
             lm = _lse(f) + np.log(dz)
@@ -703,6 +728,8 @@ class _UKF:
     def __init__(self, model: LifeModel):
         th = model.theta
         self.c, self.sig = th["c"], math.exp(th["log_sigma"])
+        self.rho = math.tanh(th.get("atanh_rho", 0.0))
+        self.prev = None  # (y, X) of the previous finite record: AR(1) residuals are prewhitened
         self.x = np.array([th["mu"], th["a0"]])
         self.P = np.diag([math.exp(th["log_s"]) ** 2, math.exp(th["log_sa"]) ** 2])
         n, alpha, beta, kappa = 2, 0.5, 2.0, 0.0
@@ -715,14 +742,24 @@ class _UKF:
 
     def update(self, y: float, X: float) -> None:
         if not np.isfinite(y):
+            self.prev = None
             return
         P = 0.5 * (self.P + self.P.T)
         w, V = np.linalg.eigh(self.cc * P)
         S = V @ np.diag(np.sqrt(np.maximum(w, 0.0)))
         Xs = np.vstack([self.x, self.x + S.T, self.x - S.T])
-        Z = Xs[:, 1] + self.c * np.exp(Xs[:, 0]) * X
+        rho = self.rho
+        if self.prev is None:  # chain start: marginal variance sigma^2 / (1 - rho^2)
+            Z = Xs[:, 1] + self.c * np.exp(Xs[:, 0]) * X
+            r2, meas = self.sig ** 2 / (1.0 - rho * rho), y
+        else:
+            yp, Xp = self.prev
+            Z = Xs[:, 1] * (1.0 - rho) + self.c * np.exp(Xs[:, 0]) * (X - rho * Xp)
+            r2, meas = self.sig ** 2, y - rho * yp
+        self.prev = (y, X)
+        y = meas
         zm = self.wm @ Z
-        Sz = self.wc @ (Z - zm) ** 2 + self.sig ** 2
+        Sz = self.wc @ (Z - zm) ** 2 + r2
         C = (self.wc[:, None] * (Xs - self.x)).T @ (Z - zm)
         K = C / Sz
         self.x = self.x + K * (y - zm)
