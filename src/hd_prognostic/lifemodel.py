@@ -15,7 +15,7 @@ Model (latent degradation path, population of units):
 * latent degradation ``L_i(E) = r_i (E / E_ref)^b``, per-unit rate ``ln r_i ~ N(mu, s^2)``, shared shape
   exponent ``b`` (fitted: the law's shape comes from the data);
 * HI: ``y_ij = a_i + c L_i(E_ij) + e_ij``, per-unit offset ``a_i ~ N(a0, s_a^2)`` (marginalised
-  analytically), ``e ~ N(0, sigma^2)``;
+  analytically), AR(1) residuals ``e_ij = rho e_i(j-1) + N(0, sigma^2)`` (prewhitened; rho fitted);
 * failure when ``L_i`` crosses the unit's threshold ``D_i``, ``ln D_i ~ N(0, s_D^2)`` (median threshold 1
   fixes the latent scale; ``c`` is the HI change at the median threshold);
 * inspection of quantity q: ``v = alpha_q + beta_q L_i + N(0, tau_q^2)`` (population-level map, fitted
@@ -25,8 +25,8 @@ Likelihood of unit i (exact up to a 1-D quadrature over ``z = ln r_i``, on an ad
 ``p_i = int N(z; mu, s) p(y_i | z) prod_insp p(v | z) P(event | z) dz`` with
 ``P(failure in (E_lo, E_hi] | z) = Phi((z + b ln E_hi)/s_D) - Phi((z + b ln E_lo)/s_D)`` (interval censored:
 it failed between its last record and the mission it was found failed at) and
-``P(survive to E_c | z) = Phi(-(z + b ln E_c)/s_D)``. All parameters by maximum likelihood (Nelder-Mead on
-the summed log marginal likelihood, started from per-unit least squares).
+``P(survive to E_c | z) = Phi(-(z + b ln E_c)/s_D)``. All parameters by maximum likelihood (L-BFGS-B, then a
+short Nelder-Mead polish, on the summed log marginal likelihood, started from per-unit least squares).
 
 Prognosis of one unit at time t_k: the posterior over z on the same grid (its HI and inspections up to t_k,
 survival to ``E(t_k)``), then ``ln D`` from its prior truncated to ``ln D > z + b ln E(t_k)``, the failure
