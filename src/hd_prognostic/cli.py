@@ -98,7 +98,8 @@ def _metrics(args) -> int:
             print(f"error: {args.truth}: wear never reaches h_fail: no end of life to score against", file=sys.stderr)
             return 2
     m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, eol, alpha=args.alpha,
-                        samples=hist.samples or None)  # quantile grid from the history: PIT and CRPS
+                        samples=hist.samples or None,  # quantile grid from the history: PIT and CRPS
+                        weights=hist.sample_weights or None, rul_horizon=hist.meta.get("rul_horizon"))
     out = Path(args.out) if args.out else p.parent
     out.mkdir(parents=True, exist_ok=True)
     (out / "metrics.json").write_text(json.dumps(m, indent=2, default=float))

@@ -258,7 +258,8 @@ def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particle
             if not np.isfinite(eol):
                 censored[a.actuator_id] = "never reaches h_fail in the simulated missions"
                 continue
-            m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, eol, alpha=alpha, samples=hist.samples)
+            m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, eol, alpha=alpha, samples=hist.samples,
+                                rul_horizon=hist.meta.get("rul_horizon"))
             m["actuator_id"] = a.actuator_id
             m["fold"] = fi
             m["seconds"] = dt
@@ -275,7 +276,7 @@ def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particle
             save_state_history(out / f"state_{a.actuator_id}.png", hist, a.mission_index, a.h_true, 1e6, "um",
                                title=f"{a.actuator_id}: wear tracking")
             row = {"actuator_id": a.actuator_id, "method": "PF", **{k: m[k] for k in (
-                "frac_in_cone_lambda_ge_0.5", "coverage_p5_p95", "cra", "prognostic_horizon", "convergence",
+                "frac_in_cone_lambda_ge_0.5", "coverage_p5_p95", "cra", "ph_point", "ph_beta", "convergence",
                 "mae", "pit_ks", "crps_mean")}, "t_eol": eol}
             rows.append(row)
             if with_ukf:
@@ -284,7 +285,7 @@ def fleet_eval(fleet: list[ActuatorData], out_dir, *, folds: int = 4, n_particle
                 mu["actuator_id"] = a.actuator_id
                 per_ukf.append(mu)
                 rows.append({"actuator_id": a.actuator_id, "method": "UKF", **{k: mu.get(k) for k in (
-                    "frac_in_cone_lambda_ge_0.5", "coverage_p5_p95", "cra", "prognostic_horizon", "convergence",
+                    "frac_in_cone_lambda_ge_0.5", "coverage_p5_p95", "cra", "ph_point", "ph_beta", "convergence",
                     "mae")}, "t_eol": eol})
             if progress:
                 print(f"{a.actuator_id} (fold {fi}): EOL {eol:.0f}, in-cone(lambda>=0.5) "

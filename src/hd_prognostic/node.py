@@ -215,20 +215,24 @@ def load_obs_model(path: str):
         return None, f"{path}: observation model unusable ({e})"
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.node import Node
     from rclpy.parameter import Parameter
     from std_msgs.msg import Float64MultiArray, String
 
     from hd_onboard.node import declare, diag_status
 
-    class PrognosticNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class PrognosticNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
+
+        def configure(self):
             self.life = None
             if self.p["life_model"]:
                 self.life, self.obs_problem = load_life_model(self.p["life_model"])
@@ -249,6 +253,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.mission_sub_qos())
             self.create_timer(float(self.p["publish_period_s"]), self._on_timer)
             self._dirty = False
+            ru.contain_callbacks(self, "hdphm/prognostic")  # no exception of a callback stops the node
 
         def _tracker(self, act: str) -> ActuatorTracker:
             if act not in self.trackers:
@@ -258,7 +263,9 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
 
         def _on_mission(self, msg):
             try:
-                meta = ru.parse_json_msg(msg, ru.TOPIC_MISSION)
+                from hd_twin.state import check_mission
+
+                meta = check_mission(ru.parse_json_msg(msg, ru.TOPIC_MISSION), ru.TOPIC_MISSION)
             except ValueError as e:
                 self.get_logger().error(str(e))
                 return
@@ -331,4 +338,4 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             a.status = [diag_status("hdphm/prognostic", lev, msg, act, est)]
             self.pub_diag.publish(a)
 
-    return PrognosticNode()
+    return bring_up(PrognosticNode(), autostart)

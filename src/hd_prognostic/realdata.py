@@ -119,7 +119,7 @@ def run_battery(data_dir: str | Path, cells=("B0005", "B0006", "B0007"), eol_fra
                                         roughening=0.05), progress=progress)
             sel = np.asarray(hist.rul_t) < t_eol
             m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, t_eol,
-                                samples=hist.samples, t_p=t_start)
+                                samples=hist.samples, t_p=t_start, rul_horizon=hist.meta.get("rul_horizon"))
             hist.meta.update({"t_eol": t_eol, "c_eol": c_eol, "prior": prior, "regen_nu": regen_nu})
             out["units"][f"{cell}@{frac}"] = {"history": hist, "metrics": m, "n_before_eol": int(sel.sum())}
             per.append(m)
@@ -251,7 +251,8 @@ def run_virkler(data_dir: str | Path, n_particles: int = 2000, seed: int = 0, ru
             hist = track(model, N, a, dN, rul_step, rul_step=rul_step, max_steps=800, t_start=N[1] if len(N) > 1 else 0,
                          unit=f"specimen{s.sid}", pf_kwargs=dict(n_particles=n_particles, seed=seed + s.sid,
                                                                    roughening=0.05), progress=progress)
-            m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, s.N_fail, samples=hist.samples)
+            m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, s.N_fail, samples=hist.samples,
+                                rul_horizon=hist.meta.get("rul_horizon"))
             hist.meta.update({"t_eol": s.N_fail, "fit": fit})
             out["units"][s.sid] = {"history": hist, "metrics": m}
             per.append(m)

@@ -21,7 +21,18 @@ from hd_prognostic.pf import ParticleFilter, weighted_quantile
 from hd_prognostic.rul import FutureExposure, RULResult, rul_distribution
 
 
-QUANTILE_LEVELS = np.linspace(0.01, 0.97, 49)
+# the RUL distribution of each prediction is stored as the quantiles at the midpoints of 50 equal-probability
+# cells, 0.01, 0.03, ..., 0.99: symmetric, each standing for 2 % of the mass, so the mean of the stored values and
+# the PIT computed from them are unbiased (the grid 0.01..0.97 used before had no 0.99: means 2-3 % low, PIT +0.01)
+QUANTILE_LEVELS = (np.arange(50) + 0.5) / 50
+
+
+def level_weights(levels) -> np.ndarray:
+    """Probability mass each stored quantile stands for: the cell between the midpoints to its neighbours
+    (0 and 1 at the ends). Equal (1/n) for the midpoint grid; corrects grids without a symmetric tail."""
+    q = np.asarray(levels, float)
+    edges = np.concatenate([[0.0], 0.5 * (q[1:] + q[:-1]), [1.0]])
+    return np.diff(edges)
 
 
 @dataclass
@@ -42,6 +53,9 @@ class RULHistory:
     p95: list[float] = field(default_factory=list)
     mean: list[float] = field(default_factory=list)
     samples: list[np.ndarray] = field(default_factory=list)  # kept in memory (thinned), not in JSON
+    # weights of ``samples`` (one array per prediction); empty = equally weighted (the in-memory draws); set when
+    # the samples are the stored quantiles of a JSON history, from their levels (:func:`level_weights`)
+    sample_weights: list[np.ndarray] = field(default_factory=list)
     state_names: tuple[str, ...] = ()
     threshold: float = float("nan")
     meta: dict = field(default_factory=dict)
@@ -51,7 +65,7 @@ class RULHistory:
                                            "ess", "rul_t", "p5", "p50", "p95", "mean", "threshold")}
         d["meta"] = {k: v for k, v in self.meta.items() if k != "snapshots"}
         d["state_names"] = list(self.state_names)
-        # the RUL distribution per prediction as 49 equally spaced quantiles (1 %..97 %, step 2 %):
+        # the RUL distribution per prediction as 50 quantiles (QUANTILE_LEVELS, 1 %..99 %, step 2 %):
         # enough for PIT and CRPS when the history is scored later
         if self.samples:
             d["rul_quantile_levels"] = QUANTILE_LEVELS.tolist()
@@ -70,6 +84,10 @@ class RULHistory:
         h.state_names = tuple(d.get("state_names", ()))
         if "rul_quantiles" in d:
             h.samples = [np.asarray(_unclean(q), float) for q in d["rul_quantiles"]]
+            lv = d.get("rul_quantile_levels")
+            if lv is not None and len(lv) == len(h.samples[0] if h.samples else lv):
+                w = level_weights(lv)
+                h.sample_weights = [w.copy() for _ in h.samples]
         h.threshold = _unclean(d.get("threshold"))
         h.meta = d.get("meta", {})
         return h
@@ -175,6 +193,7 @@ def track(
     if snaps:
         hist.meta["snapshots"] = snaps
     hist.meta["n_particles"] = pf.n
+    hist.meta["rul_horizon"] = float(rul_step * max_steps)  # RUL = inf means "no failure within this"
     return hist
 
 

@@ -128,7 +128,8 @@ def _score(fleet: Path, aid: str, life_json: Path, out: Path, truth: dict, args)
     eol = next(x["eol_mission"] for x in truth["actuators"] if x["actuator_id"] == aid)
     if eol is None:
         return {"note": f"{aid} did not reach end of life within {args.max_missions} missions: nothing to score"}
-    m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), alpha=0.2, samples=hist.samples)
+    m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), alpha=0.2, samples=hist.samples,
+                        rul_horizon=hist.meta.get("rul_horizon"))
     m.pop("pit", None)
     save_alpha_lambda(out / f"alpha_lambda_{aid}.png", hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), 0.2,
                       title=f"{aid}: RUL (held-out actuator)", unit="missions")
@@ -163,7 +164,14 @@ def run_demo(args) -> int:
               "recorded_files": len(summary.get("recorded_files") or []),
               "rul_score": score, "wall_s": time.perf_counter() - t_start}
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
+    (out / "stack_summary.json").write_text(json.dumps(
+        {k: summary.get(k) for k in ("flags", "health", "health_history", "n_warn", "n_error", "speedup", "twin")},
+        indent=1, default=str))
     _print_report(report, summary)
+    from hdphm.report import write_report
+
+    page = write_report(out, out / "report.html", title=f"hdphm demo: held-out actuator {test_id}")
+    print(f"report page (open in a browser, works offline): {page}")
     return 0
 
 
@@ -194,7 +202,8 @@ def _print_report(rep: dict, summary: dict) -> None:
         print(f"RUL (batch, same core as the node): at mission {last['t']:.0f} P50 {last['p50']:.1f} missions "
               f"[P5 {last['p5']:.1f}, P95 {last['p95']:.1f}]; true end of life at mission {sc['eol_mission']}")
         for label, d in (("batch", sc), ("node", sc.get("node") or {})):
-            keys = [k for k in ("alpha_lambda", "fraction_in_cone", "coverage_p5_p95", "cra", "prognostic_horizon")
+            keys = [k for k in ("alpha_lambda_point", "alpha_lambda_beta", "frac_in_cone_lambda_ge_0.5",
+                                "coverage_p5_p95", "cra", "ph_point", "ph_beta")
                     if k in d]
             if keys:
                 print(f"  {label}: " + "; ".join(f"{k} {_fmt(d[k])}" for k in keys))

@@ -387,9 +387,9 @@ def simulate(missions: list[dict], duration: float = DEFAULT_DURATION, sample_ra
 # bag writing (mcap-ros2-support, as any outside tool would)
 # ---------------------------------------------------------------------------------------------
 
-_TIME = "================================================================================\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
-_HEADER = ("================================================================================\nMSG: std_msgs/Header\n"
-           "builtin_interfaces/Time stamp\nstring frame_id\n")
+_SEP = "=" * 80 + "\n"
+_TIME = _SEP + "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+_HEADER = _SEP + "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
 MSGDEF_JOINT_STATE = ("std_msgs/Header header\n\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
                       "float64[] effort\n" + _HEADER + _TIME)
 MSGDEF_TEMPERATURE = "std_msgs/Header header\n\nfloat64 temperature\nfloat64 variance\n" + _HEADER + _TIME
@@ -400,7 +400,8 @@ QOS = ("- history: unknown\n  depth: 0\n  reliability: reliable\n  durability: v
 
 
 def write_bag(path: str | os.PathLike, sig: dict, *, actuator_id: str = "EMA2-0001", mission_index: int = 0,
-              operating_hours: float = 0.0, start_ns: int = 1_700_000_000_000_000_000, extra: dict | None = None) -> Path:
+              operating_hours: float = 0.0, start_ns: int = 1_700_000_000_000_000_000,
+              extra: dict | None = None) -> Path:
     """Write one mission as a contract bag (MCAP, ROS 2 profile) with mcap-ros2-support."""
     from mcap.writer import CompressionType
     from mcap_ros2.writer import Writer
@@ -540,7 +541,7 @@ def write_case(out_dir: str | os.PathLike, effect: str = "clean", missions: int 
 def fleet(out_dir: str | os.PathLike, units: int = 6, missions: int = 30, duration: float = 20.0, seed: int = 0,
           life_missions: float = 15.0, effect: str = "clean", hours_per_mission: float = 100.0,
           sample_rate: float = DEFAULT_SAMPLE_RATE, inspect_every: int = 0, params: dict | None = None,
-          plant: dict | None = None) -> dict:
+          plant: dict | None = None, remove_frac: float = 0.0) -> dict:
     """Run ``units`` actuators mission by mission until failure (or ``missions``); write bags and truth.
 
     Wear grows with the transmitted load x sliding of each mission (exposure = integral |Q omega_f| dt),
@@ -551,7 +552,8 @@ def fleet(out_dir: str | os.PathLike, units: int = 6, missions: int = 30, durati
         out_dir/events.csv                     actuator_id,mission_index,event,quantity,value
         out_dir/fleet_truth.json               wear per mission, thresholds, failure mission, effect
 
-    Truth never goes into the bags.
+    ``remove_frac``: that fraction of units (drawn) is removed healthy at a planned mission (event
+    ``removal``, censored) unless it failed before. Truth never goes into the bags.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -572,12 +574,21 @@ def fleet(out_dir: str | os.PathLike, units: int = 6, missions: int = 30, durati
     hist = {i: [] for i in ids}
     failed = {}
     events = []
+    # planned removals (still healthy when removed: censored), drawn before anything is flown
+    rr = np.random.default_rng([seed, 777])
+    removal_at = {u: int(rr.integers(1, max(2, int(1.2 * life_missions)) + 1)) for u in range(units)
+                  if rr.random() < remove_frac}
+    removed = {}
     for m in range(missions + 1):  # the check at index `missions` finds units that failed in the last one
-        alive = [u for u in range(units) if ids[u] not in failed]
+        alive = [u for u in range(units) if ids[u] not in failed and ids[u] not in removed]
         for u in list(alive):
             if wear[u] >= thr[u]:
                 failed[ids[u]] = m
                 events.append((ids[u], m, "failure", "", ""))
+                alive.remove(u)
+            elif removal_at.get(u) == m:
+                removed[ids[u]] = m
+                events.append((ids[u], m, "removal", "", ""))
                 alive.remove(u)
         if not alive or m == missions:
             break
@@ -611,6 +622,7 @@ def fleet(out_dir: str | os.PathLike, units: int = 6, missions: int = 30, durati
              "life_missions_nominal": life_missions, "wear_law": W, "a_nom": a_nom,
              "units": [{"actuator_id": ids[u], "rate_factor": float(rate[u]), "threshold": float(thr[u]),
                         "plant": unit_plant[u], "failure_mission": failed.get(ids[u]),
+                        "removal_mission": removed.get(ids[u]),
                         "missions": hist[ids[u]]} for u in range(units)]}
     (out_dir / "fleet_truth.json").write_text(json.dumps(_jsonable(truth), indent=1))
     return truth
@@ -660,6 +672,8 @@ def main(argv=None) -> int:
     f.add_argument("--life", type=float, default=15.0, help="nominal missions to failure")
     f.add_argument("--hours-per-mission", type=float, default=100.0)
     f.add_argument("--inspect-every", type=int, default=0, help="inspection rows every K missions (0: none)")
+    f.add_argument("--remove-frac", type=float, default=0.0,
+                   help="fraction of units removed healthy at a planned mission (censored)")
     sub.add_parser("effects", help="list the effects and their parameters")
     a = ap.parse_args(argv)
     t0 = time.time()
@@ -683,7 +697,7 @@ def main(argv=None) -> int:
         print(f"wrote {len(r['bags'])} bags + {r['truth_path']} in {time.time() - t0:.1f} s")
     else:
         tr = fleet(a.out, a.units, a.missions, a.duration, a.seed, a.life, a.effect, a.hours_per_mission,
-                   a.rate, a.inspect_every, params=params, plant=plant)
+                   a.rate, a.inspect_every, params=params, plant=plant, remove_frac=a.remove_frac)
         fm = [u["failure_mission"] for u in tr["units"]]
         print(f"wrote fleet to {a.out}: failure missions {fm} in {time.time() - t0:.1f} s")
     return 0

@@ -57,7 +57,7 @@ def plant2_fleet(tmp_path_factory):
     """A small run-to-failure fleet of the independent plant: ``{"dir", "events", "truth"}``.
 
     4 units, at most 10 missions of 3 s each (nominal life 5 missions, unit scatter), inspections every
-    third mission. ``dir/EMA2-Uxx/mission_000.mcap`` ... (missions flown only), ``dir/events.csv``
+    third mission, 30 % of units planned for a removal while healthy (seed 3: three failures, one removal). ``dir/EMA2-Uxx/mission_000.mcap`` ... (missions flown only), ``dir/events.csv``
     (``actuator_id,mission_index,event,quantity,value``), ``dir/fleet_truth.json`` (true wear per mission,
     thresholds, failure missions: scoring only).
     """
@@ -66,7 +66,8 @@ def plant2_fleet(tmp_path_factory):
     from tests.plants import ema2
 
     out = tmp_path_factory.mktemp("plant2_fleet")
-    truth = ema2.fleet(out, units=4, missions=10, duration=3.0, seed=3, life_missions=5.0, inspect_every=3)
+    truth = ema2.fleet(out, units=4, missions=10, duration=3.0, seed=3, life_missions=5.0, inspect_every=3,
+                       remove_frac=0.3)
     with open(out / "events.csv") as f:
         events = list(csv.DictReader(f))
     return {"dir": out, "events": events, "truth": truth}

@@ -110,10 +110,10 @@ def test_base_physics_tracking_and_torque_balance(plant2_case_bags):
         assert np.max(np.abs(twist)) < 5e-3 and np.corrcoef(twist, s["Q_red"])[0, 1] > 0.95
         # motor balance: tau_m N - Q_red is friction (Coulomb + viscous) plus inertia
         J, a, Fc, b = _motor_fit(s)
-        assert a == pytest.approx(1.0, abs=0.02)
-        assert Fc == pytest.approx(p["F_c"], rel=0.15)
-        assert b == pytest.approx(p["b_ref"], rel=0.15)
-        assert J == pytest.approx(p["J_m"], rel=0.3)
+        assert a == pytest.approx(1.0, abs=0.005)
+        assert Fc == pytest.approx(p["F_c"], rel=0.05)
+        assert b == pytest.approx(p["b_ref"], rel=0.06)
+        assert J == pytest.approx(p["J_m"], rel=0.05)
         # near-constant speed: N tau_m - Q_red is the friction N (F_c sign(omega) + b omega), nothing else
         acc = np.gradient(_lp(s["omega_m"]), 1e-3)
         steady = (np.abs(s["omega_m"]) > 20) & (np.abs(acc) < 100)
@@ -150,7 +150,7 @@ def test_each_effect_shows_in_its_signal_at_its_size(plant2_case_bags):
     for e in ("ripple", "ripple_weak", "ripple_temp_viscosity", "clean"):
         amp = np.mean([_amp(c) for c in motor_coef(e, (_ripple, _rippls))])
         want = E[e].get("ripple_amp", 0.0)
-        assert amp == pytest.approx(want, abs=0.15 * want + 0.002), e
+        assert amp == pytest.approx(want, abs=0.08 * want + 0.0015), e
     # (2) temperature-dependent viscosity b(T) = b_ref exp(-c (T - T_ref)): c by profile least squares over
     #     the four missions pooled (they start at different temperatures and warm up)
     grid = np.linspace(-0.02, 0.06, 17)
@@ -176,17 +176,17 @@ def test_each_effect_shows_in_its_signal_at_its_size(plant2_case_bags):
     strib = (lambda s: np.exp(-(s["omega_m"] / 5.0) ** 2) * np.tanh(s["omega_m"] / P["v_t"]),)
     for e, want in (("stribeck", E["stribeck"]["stribeck_rise"]), ("clean", 0.0)):
         c = np.median(motor_coef(e, strib)[:, 0])
-        assert c == pytest.approx(want, abs=0.25 * want + 0.006), e
+        assert c == pytest.approx(want, abs=0.1 * want + 0.004), e
     # (4) load-dependent friction
     load = (lambda s: np.abs(s["Q_red"]) / N * np.tanh(s["omega_m"] / P["v_t"]),)
     for e, want in (("load_friction", E["load_friction"]["load_friction"]), ("clean", 0.0)):
         c = np.median(motor_coef(e, load)[:, 0])
-        assert c == pytest.approx(want, abs=0.15 * want + 0.005), e
+        assert c == pytest.approx(want, abs=0.08 * want + 0.003), e
     # (5) torque periodic in the output angle (3/rev over a 0.14-rev stroke), reflected to the motor
     outp = (lambda s: np.sin(3 * s["theta_f"] + 0.9) / N,)
     for e, want in (("output_periodic", E["output_periodic"]["out_amp"]), ("clean", 0.0)):
         c = np.median(motor_coef(e, outp)[:, 0])
-        assert c == pytest.approx(want, abs=0.2 * want + 0.8), e
+        assert c == pytest.approx(want, abs=0.05 * want + 0.4), e
         assert max(np.ptp(s["theta_f"]) for s in sigs(e)) / (2 * np.pi) < 0.15  # stroke: no full period
     # (6) dead zone in the twist -> Q_red relation: twist = Q/k1 - k3 Q^3/k1^4 + b sign(Q)
     for e, want in (("dead_zone", E["dead_zone"]["dead_zone"]), ("clean", 0.0)):
@@ -196,7 +196,7 @@ def test_each_effect_shows_in_its_signal_at_its_size(plant2_case_bags):
             ok = np.abs(Q) > 10
             w = s["theta_m"] / N - s["theta_f"]
             bs.append(_fit(np.stack([Q, Q ** 3, np.sign(Q)], 1)[ok], w[ok])[2])
-        assert np.median(bs) == pytest.approx(want, abs=0.2 * want + 2e-5), e
+        assert np.median(bs) == pytest.approx(want, abs=0.12 * want + 2e-5), e
     # (7) stiffness periodic in the wave-generator angle (2/rev): Q = k1 (1 + eps cos(2 theta_m + psi)) w + k3 w^3
     for e, want in (("position_stiffness", E["position_stiffness"]["stiff_mod"]), ("clean", 0.0)):
         eps = []
@@ -206,7 +206,7 @@ def test_each_effect_shows_in_its_signal_at_its_size(plant2_case_bags):
                           np.gradient(w, 1e-3)], 1)
             c = _fit(X, s["Q_red"])
             eps.append(np.hypot(c[2], c[3]) / c[0])
-        assert np.median(eps) == pytest.approx(want, abs=0.2 * want + 0.01), e
+        assert np.median(eps) == pytest.approx(want, abs=0.05 * want + 0.005), e
     # the Q_red-side effects leave the motor side alone and vice versa (the signal map is right)
     assert ema2.EFFECT_SIGNAL["dead_zone"] == "Q_red" and ema2.EFFECT_SIGNAL["ripple"] == "tau_m"
 
@@ -216,7 +216,9 @@ def test_fleet_fails_at_truth_threshold_and_events_match(plant2_fleet):
 
     d, events, truth = plant2_fleet["dir"], plant2_fleet["events"], plant2_fleet["truth"]
     fail = {r["actuator_id"]: int(r["mission_index"]) for r in events if r["event"] == "failure"}
+    removal = {r["actuator_id"]: int(r["mission_index"]) for r in events if r["event"] == "removal"}
     assert len(fail) >= 2, "the small fleet should see failures"
+    assert set(r["event"] for r in events) <= {"failure", "removal", "inspection"}
     for u in truth["units"]:
         uid, ms = u["actuator_id"], u["missions"]
         bags = sorted((d / uid).glob("mission_*.mcap"))
@@ -225,7 +227,10 @@ def test_fleet_fails_at_truth_threshold_and_events_match(plant2_fleet):
         assert all(np.diff(wear_start) > 0)
         if u["failure_mission"] is None:
             assert uid not in fail and ms[-1]["wear_end"] < u["threshold"]
+            if u["removal_mission"] is not None:  # removed healthy at the start of that mission: censored
+                assert removal[uid] == u["removal_mission"] == len(bags)
             continue
+        assert uid not in removal
         f = u["failure_mission"]
         assert fail[uid] == f == len(bags)  # found failed at the start of mission f: flew 0..f-1
         assert ms[-1]["wear_end"] >= u["threshold"] > ms[-1]["wear_start"]
@@ -254,5 +259,16 @@ def test_cli_mission_writes_a_valid_bag(tmp_path):
                         "1.5", "--seed", "5", "--out", str(out), "--truth", str(tmp_path / "t.json")],
                        cwd=REPO, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
-    _check_bag(out)
+    m = _check_bag(out)
     assert json.loads((tmp_path / "t.json").read_text())["effect"]["ripple_amp"] == 0.04
+    # an independent decoder (mcap-ros2-support's own reader) agrees with ours on every joint-state message
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(out, "rb") as f:
+        rd = make_reader(f, decoder_factories=[DecoderFactory()])
+        js = [msg for _, _, _, msg in rd.iter_decoded_messages(topics=["/hd/joint_states"])]
+    assert len(js) == m.n and list(js[0].name) == ["motor", "output"]
+    np.testing.assert_array_equal([x.position[0] for x in js], m.signal("theta_m"))
+    np.testing.assert_array_equal([x.effort[1] for x in js], m.signal("Q_red"))
+    assert js[7].header.stamp.nanosec == 7_000_000
