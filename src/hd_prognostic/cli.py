@@ -10,8 +10,10 @@
     monotonicity / separability study of the health features.
 ``hdphm prognostic fit-obs FLEET_DIR --out JSON``
     fit the observation model + Archard prior on a (training) fleet.
-``hdphm prognostic battery|virkler --out DIR``
-    the same core on real degradation data.
+``hdphm prognostic fit FLEET_DIR|HI.csv --events EVENTS.csv --out MODEL.json``
+    the life model from HI histories + failure/removal/inspection events (``prognose --model`` uses it).
+``hdphm prognostic battery|virkler --data DIR --out DIR [--export DIR]``
+    the older particle filters on real degradation data, or the data as HI CSV + events (``--export``).
 """
 
 from __future__ import annotations

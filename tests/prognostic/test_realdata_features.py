@@ -127,3 +127,24 @@ def test_derived_motor_angle_makes_ke_features_unobservable():
     f = block_features(m.t, m.theta_m, m.theta_m / 100.0, m.omega_m, m.omega_f, m.tau_m, m.Q_red, 100.0, 0.1)
     assert np.isnan(f["HF_MTW_IF"]) and any("derived" in n for n in f["notes"])
     assert np.isfinite(f["cs_gain"])  # the current-speed features do not need the output encoder
+
+
+@needs_data
+def test_battery_export_runs_through_the_life_model(tmp_path):
+    """The NASA cells as HI CSV + events (file arguments only), then fit and prognose on the CSV path."""
+    from hd_prognostic.lifemodel import read_events, read_hi_csv
+    from hdphm.cli import main as hdphm
+
+    assert hdphm(["prognostic", "battery", "--data", str(MEASURED / "nasa_battery"), "--export", str(tmp_path)]) == 0
+    units = {u.unit: u for u in read_hi_csv(tmp_path / "battery_hi.csv")}
+    ev = read_events(tmp_path / "battery_events.csv")
+    assert set(units) == {"B0005", "B0006", "B0007"}
+    for c, e in ev.items():  # failure = first cycle at or below 80 % of the rated 2 Ah
+        u = units[c]
+        k = int(np.flatnonzero(u.y <= 1.6)[0])
+        assert e.failure == u.t[k]
+    assert hdphm(["prognostic", "fit", str(tmp_path / "battery_hi.csv"), "--events", str(tmp_path / "battery_events.csv"),
+                  "--out", str(tmp_path / "m.json")]) == 0
+    assert hdphm(["prognose", str(tmp_path / "battery_hi.csv"), "--unit", "B0006", "--model", str(tmp_path / "m.json"),
+                  "--out", str(tmp_path / "p"), "--samples", "200", "--no-plots"]) == 0
+    assert json.loads((tmp_path / "p" / "rul_history.json").read_text())["unit"] == "B0006"
