@@ -19,6 +19,7 @@ from __future__ import annotations
 import io
 import os
 import struct
+import threading
 import zlib
 from dataclasses import dataclass, field
 from typing import BinaryIO, Iterator
@@ -130,32 +131,33 @@ def _compress(data: bytes, compression: str) -> bytes:
     raise ValueError(f"unsupported chunk compression {compression!r} (zstd, lz4 or none)")
 
 
-_ZC = None
-_ZD = None
+#: one zstd (de)compressor per thread: zstandard's objects are not thread-safe (two threads sharing one,
+#: e.g. a multi-threaded Dask worker reading two bags, get "Data corruption detected")
+_Z = threading.local()
 
 
 def _zstd_compressor():
-    global _ZC
-    if _ZC is None:
+    zc = getattr(_Z, "c", None)
+    if zc is None:
         import zstandard
 
-        _ZC = zstandard.ZstdCompressor(level=3)
-    return _ZC
+        zc = _Z.c = zstandard.ZstdCompressor(level=3)
+    return zc
 
 
 def _decompress(data: bytes, compression: str, size: int) -> bytes:
     """Decompress a chunk, never producing more than ``size + 1`` bytes (``size``: the chunk's declared
     uncompressed size, already checked against :data:`MAX_CHUNK_BYTES`): a frame that claims or expands
     to more is cut there and the caller refuses the size mismatch, so a bomb costs at most the cap."""
-    global _ZD
     if compression == "":
         return data
     if compression == "zstd":
-        if _ZD is None:
+        zd = getattr(_Z, "d", None)
+        if zd is None:
             import zstandard
 
-            _ZD = zstandard.ZstdDecompressor()
-        with _ZD.stream_reader(io.BytesIO(data)) as r:
+            zd = _Z.d = zstandard.ZstdDecompressor()
+        with zd.stream_reader(io.BytesIO(data)) as r:
             return _read_capped(r, size + 1)
     if compression == "lz4":
         import lz4.frame

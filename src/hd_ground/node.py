@@ -36,6 +36,8 @@ PARAMS: dict[str, Any] = {
     "run_on_start": True,
     "recalibrate": True,
     "model_dir": "",  # twin the onboard node runs (ONNX dir); "" -> physics stand-in: residuals must match it
+    "store_dir": "",  # fleet store (hd_ground.fleet): "" -> none; else the archive's new missions are added to it
+    "fleet_scheduler": "local:1",  # Dask scheduler of that fleet analysis (local[:N] or tcp://HOST:PORT)
 }
 
 
@@ -137,6 +139,15 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             try:
                 upd, rep = analyse_archive(self.p["archive_dir"], int(self.p["healthy_missions"]), bool(self.p["recalibrate"]),
                                            log=lambda s: self.get_logger().warning(s), model_dir=self.p["model_dir"])
+                if self.p["store_dir"]:  # the same store `hdphm ground fleet` writes and `hdphm fleet` reads
+                    from hd_ground.fleet.run import fleet_status, run_fleet
+                    from hd_ground.fleet.tasks import FleetOptions
+
+                    s = run_fleet([self.p["archive_dir"]], self.p["store_dir"], self.p["fleet_scheduler"],
+                                  FleetOptions(healthy_missions=int(self.p["healthy_missions"]),
+                                               model_dir=self.p["model_dir"]), progress=False,
+                                  log=lambda s: self.get_logger().info(s))
+                    rep["fleet"] = {"summary": s, "status": fleet_status(self.p["store_dir"])}
                 rep["wall_s"] = time.time() - t0
                 self.result = (upd, rep)
             except Exception as e:  # noqa: BLE001 - report, never crash the stack

@@ -225,36 +225,47 @@ def load_demo_run(root: Path) -> RunView:
 
 
 def load_store(root: Path) -> RunView:
-    """A fleet store (``hdphm ground fleet --store``): read its tables through DuckDB when present."""
+    """A fleet store (``hdphm ground fleet --store``), read through its DuckDB views."""
     view = RunView(root=root, kind="fleet store")
     try:
-        import duckdb  # noqa: F401
-    except ImportError:
-        view.notes.append("duckdb is not installed: the fleet store cannot be read")
+        from hd_ground.fleet.run import fleet_status
+        from hd_ground.fleet.store import FleetStore
+    except ImportError as e:  # duckdb / pyarrow missing
+        view.notes.append(f"the fleet store cannot be read here ({e})")
         return view
-    try:
-        from hd_ground.fleet.store import FleetStore  # type: ignore
-    except ImportError:
-        view.notes.append("this hdphm has no fleet store reader (hd_ground.fleet)")
-        return view
-    store = FleetStore(root)
-    for row in store.status_rows():
-        aid = str(row.get("actuator_id"))
-        av = _actuator(view, aid)
+    classes = ("healthy", "tooth_wear", "lubrication_loss", "flexspline_stiffness_loss", "unknown")
+    for row in fleet_status(str(root)):
+        av = _actuator(view, str(row.get("actuator_id")))
         av.missions = int(row.get("missions") or 0)
-        av.last_health = {k: row.get(k) for k in ("rul_p5", "rul_p50", "rul_p95", "risk", "health") if k in row}
-        av.suspected_fault = str(row.get("suspected_fault") or "")
-        probs = row.get("fault_probabilities")
-        if isinstance(probs, dict):
-            av.fault_probabilities = probs
-        n_flags = int(row.get("n_flags") or 0)
-        av.flags = [{"stamp_s": float("nan"), "level": 1, "reason": "(from store)"}] * min(n_flags, 1000)
-    for aid, rows in store.rul_history().items():
+        av.last_health = {"h_mean": row.get("h_mean"), "rul_p5": row.get("rul_p5"), "rul_p50": row.get("rul_p50"),
+                          "rul_p95": row.get("rul_p95")}
+        probs = {c: row.get(f"p_{c}") for c in classes if _finite(row.get(f"p_{c}")) is not None}
+        av.fault_probabilities = probs
+        av.suspected_fault = str(row.get("label") or "")
+    store = FleetStore(root)
+    try:
+        cols, rows = store.query("SELECT actuator_id, mission_index, rul_p5, rul_p50, rul_p95, h_mean FROM rul "
+                                 "ORDER BY actuator_id, mission_index")
+    except ValueError as e:  # no RUL computed yet in this store
+        rows = []
+        view.notes.append(f"no RUL history in the store yet ({str(e)[:200]})")
+    per: dict[str, list[tuple]] = {}
+    for r in rows:
+        per.setdefault(str(r[0]), []).append(r)
+    for aid, rs in per.items():
         av = _actuator(view, aid)
-        if rows:
-            av.rul_history = {"rul_t": [r["mission_index"] for r in rows],
-                              "p5": [r["rul_p5"] for r in rows], "p50": [r["rul_p50"] for r in rows],
-                              "p95": [r["rul_p95"] for r in rows], "time_unit": "missions"}
+        av.rul_history = {"rul_t": [r[1] for r in rs], "p5": [r[2] for r in rs], "p50": [r[3] for r in rs],
+                          "p95": [r[4] for r in rs], "t": [r[1] for r in rs], "time_unit": "missions"}
+        av.health_history = [{"mission_index": r[1], "h_mean": r[5]} for r in rs]
+    try:
+        cols, rows = store.query("SELECT actuator_id, mission_index, name, level FROM events WHERE kind = 'flag' "
+                                 "ORDER BY actuator_id, mission_index LIMIT 100000")
+        for aid, mi, name, level in rows:
+            _actuator(view, str(aid)).flags.append({"stamp_s": mi, "level": int(level or 1),
+                                                   "reason": f"mission {mi}: {name}"})
+    except Exception as e:  # noqa: BLE001 - an older store without flag events: the page says so
+        view.notes.append(f"flags not read from the store: {e}")
+    view.settings = {"store": str(root)}
     return view
 
 
@@ -265,7 +276,7 @@ def load_run(path: str | Path) -> RunView:
     if root.is_file():
         raise ValueError(f"{root}: expected a run folder (hdphm demo --out), a discovery output or a fleet store, "
                          "got a file")
-    if (root / "fleet.duckdb").exists() or (root / "missions").is_dir():
+    if (root / "fleet.duckdb").exists() or ((root / "data").is_dir() and not (root / "report.json").exists()):
         return load_store(root)
     if (root / "report.json").is_file() and "held_out_actuator" in (_read_json(root / "report.json") or {}):
         return load_demo_run(root)

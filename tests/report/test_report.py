@@ -54,3 +54,20 @@ def test_cli_json_output(demo_like_run, tmp_path, capsys):
     assert main(["report", str(demo_like_run), "--out", str(tmp_path / "x.html"), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["report"].endswith("x.html") and d["bytes"] > 1_000_000  # plotly.js inside
+
+
+def test_report_of_a_fleet_store(small_fleet_dir, tmp_path):
+    """The page is made from a fleet store (hdphm ground fleet) through its DuckDB views."""
+    pytest.importorskip("duckdb")
+    from hd_ground.fleet.tasks import FleetOptions, calibrate_task, mission_task
+
+    bags = sorted(str(p) for p in small_fleet_dir.rglob("*.mcap") if "EMA-0002" in str(p))
+    opts = FleetOptions(healthy_missions=1, onboard={"warmup_s": 1.0})
+    cal = calibrate_task(bags[:1], opts)
+    store = tmp_path / "store"
+    for b in bags:
+        mission_task(b, str(store), cal, opts)
+    view = load_run(store)
+    assert view.kind == "fleet store" and view.actuators["EMA-0002"].missions == len(bags)
+    page = write_report(store, tmp_path / "fleet.html").read_text()
+    assert "<a href='#act-EMA-0002'>EMA-0002</a>" in page
