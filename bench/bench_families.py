@@ -227,8 +227,9 @@ def _f(x, fmt="{:.2f}") -> str:
 
 def format_table(res: dict) -> str:
     lines = ["| world | hidden effect | discovery: first named right? (first finding) | held-out after/before | "
-             "twin NRMSE % | LS balance NRMSE % | twin / LS | prognostics: P5-P95 coverage | in cone (alpha 0.2) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "twin NRMSE % | twin's physics-only % | LS balance NRMSE % | twin / LS | prognostics: P5-P95 coverage | "
+             "in cone (alpha 0.2) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for w, r in res.items():
         d, t, p = r.get("discovery", {}), r.get("twin", {}), r.get("prognostics", {})
         first = d.get("first")
@@ -239,7 +240,8 @@ def format_table(res: dict) -> str:
         if err(d):
             ftxt, right = err(d), "-"
         lines.append(f"| {w} | {d.get('effect', '-')} | {right}: {ftxt} | {_f(d.get('after_over_before'))} | "
-                     f"{_f(t.get('twin_nrmse_pct'))} | {_f((t.get('ls') or {}).get('nrmse_pct'), '{:.3f}')} | "
+                     f"{_f(t.get('twin_nrmse_pct'))} | {_f(t.get('physics_only_nrmse_pct'))} | "
+                     f"{_f((t.get('ls') or {}).get('nrmse_pct'), '{:.3f}')} | "
                      f"{_f(t.get('ratio_twin_over_ls'), '{:.1f}')} | {_f(p.get('coverage'))}{pm} | "
                      f"{_f(p.get('in_cone'))}{pm} |")
     return "\n".join(lines)
@@ -260,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mission-hours", type=float, default=3500.0,
                     help="hd_sim wear acceleration (hours one fleet mission stands for)")
     ap.add_argument("--particles", type=int, default=1000)
+    ap.add_argument("--table", action="store_true", help="only print the table of OUT/bench_families.json")
+    ap.add_argument("--merge", action="store_true",
+                    help="update OUT/bench_families.json (rerun some worlds/parts, keep the others)")
     a = ap.parse_args(argv)
     worlds = [w for w in a.worlds.split(",") if w]
     parts = [p for p in a.parts.split(",") if p]
@@ -275,12 +280,17 @@ def main(argv: list[str] | None = None) -> int:
         if str(root) not in sys.path:
             sys.path.insert(0, str(root))  # tests.plants.ema2 lives in the repository, not in the package
     out = Path(a.out)
+    if a.table:
+        print(format_table(json.loads((out / "bench_families.json").read_text())["results"]))
+        return 0
     out.mkdir(parents=True, exist_ok=True)
     res: dict = {}
     jpath = out / "bench_families.json"
+    if a.merge and jpath.exists():
+        res = json.loads(jpath.read_text())["results"]
     t_all = time.perf_counter()
     for w in worlds:
-        res[w] = {}
+        res.setdefault(w, {})
         wd = out / w
         for part in parts:
             t0 = time.perf_counter()
@@ -307,6 +317,7 @@ def main(argv: list[str] | None = None) -> int:
                 r = {"error": f"{type(e).__name__}: {e}", "traceback": traceback.format_exc(limit=3)}
                 print(f"    ERROR {r['error']}", flush=True)
             r["wall_s"] = time.perf_counter() - t0
+            r["args"] = dict(vars(a))
             res[w][part] = r
             jpath.write_text(json.dumps({"args": vars(a), "results": res}, indent=1, default=str))
     print()

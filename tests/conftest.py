@@ -7,6 +7,10 @@
 - ``small_fleet_dir``: 3 actuators x 3 missions of 3 s (nominal wear schedule
   accelerated so wear visibly grows), one folder per actuator + fleet_truth.json.
 - ``sim_mission``: a 3 s realistic (default effects) mission in memory: (Mission, truth).
+- ``family_names``, ``family_case_bags(family, effect=None, ...)`` -> FamilyCase, ``family_fleet(family, ...)``
+  -> Path: the structurally different hd_sim plant families (docs/FAMILIES.md), built once per session.
+- ``plant_world`` (parametrised over ``PLANT_WORLD``: three families + plant2): a ``World`` with
+  ``case(effect=None)`` and ``fleet()``, one interface for every world.
 """
 
 from __future__ import annotations

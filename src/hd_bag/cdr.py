@@ -32,6 +32,9 @@ SCHEMAS = {
 }
 
 ENCAP_LE = b"\x00\x01\x00\x00"
+#: Most joints (names and array entries) a JointState may carry: the contract has 2 (motor, output),
+#: 1 on /hd/command; rigs that log extra joints on the topic stay far below 64.
+MAX_JOINTS = 64
 
 
 def normalise_type(name: str) -> str:
@@ -120,7 +123,7 @@ def parse_jointstate_layout(payload: bytes) -> JointStateLayout | None:
         p = 4 + _align(p - 4, 4)
         n = struct.unpack_from("<I", b, p)[0]
         p += 4
-        if n > 10000:
+        if n > MAX_JOINTS:
             return None
         names = []
         for _ in range(n):
@@ -132,6 +135,8 @@ def parse_jointstate_layout(payload: bytes) -> JointStateLayout | None:
         for _ in range(3):
             p = 4 + _align(p - 4, 4)
             k = struct.unpack_from("<I", b, p)[0]
+            if k > MAX_JOINTS:
+                return None
             counts.append(k)
             p += 4
             if k:
@@ -244,13 +249,20 @@ def encode_string(text: str) -> bytes:
 _DECODERS: dict[tuple[str, str], object] = {}
 
 
-def generic_decoder(type_name: str, schema_text: bytes):
-    """mcap-ros2-support decoder function for a schema (cached)."""
-    key = (type_name, schema_text.decode("utf-8", "replace"))
-    dec = _DECODERS.get(key)
+def generic_decoder(type_name: str, schema_text: bytes | None = None):
+    """mcap-ros2-support decoder function for one of the contract's types (cached).
+
+    The decoder is built from this module's fixed :data:`SCHEMAS` text, never from a schema found in
+    a file (``schema_text`` is accepted for compatibility and ignored): a bag names a type, it does
+    not get to define how we parse it. A type outside the table raises ValueError."""
+    name = normalise_type(type_name)
+    dec = _DECODERS.get(name)
     if dec is None:
+        if name not in SCHEMAS:
+            raise ValueError(f"message type {type_name!r} is not one the contract reader decodes "
+                             f"({', '.join(sorted(SCHEMAS))})")
         from mcap_ros2._dynamic import generate_dynamic
 
-        dec = generate_dynamic(type_name, key[1])[type_name]
-        _DECODERS[key] = dec
+        dec = generate_dynamic(name, SCHEMAS[name])[name]
+        _DECODERS[name] = dec
     return dec

@@ -35,6 +35,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, metavar="BAG_OR_DIR")
     p.set_defaults(func=_import_csv)
 
+    p = sub.add_parser("bag", help="bag file tools (recover: finalise a recording cut short)")
+    bsub = p.add_subparsers(dest="bag_command", metavar="BAGCOMMAND")
+    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+    pr = bsub.add_parser("recover", help="finalised copy of an MCAP without summary/footer (recorder killed)",
+                         description="Copy every complete chunk of an MCAP file that ends without its summary and "
+                                     "footer (a recorder killed by SIGKILL or a power cut) into a new, finalised "
+                                     "file that any MCAP reader opens. Damaged records are skipped and reported.")
+    pr.add_argument("bag", metavar="BAG")
+    pr.add_argument("--out", default=None, help="output file (default: BAG with .recovered.mcap)")
+    pr.set_defaults(func=_recover)
+
     p = sub.add_parser("inspect", help="topics, counts, rates, duration, metadata and read report of a bag")
     p.add_argument("bags", nargs="+", metavar="BAG")
     p.set_defaults(func=_inspect)
@@ -61,11 +72,14 @@ def _validate(args) -> int:
         print("no bags found", file=sys.stderr)
         return 2
     n_bad = 0
+    failed: set[str] = set()
     for b in bags:
         vs = validate_bag(b)
         errs = [v for v in vs if v.severity == "error"]
         fail = bool(errs) or (args.strict and vs)
         n_bad += bool(fail)
+        if fail:
+            failed.add(b)
         shown: dict[tuple, int] = {}
         hidden: dict[tuple, int] = {}
         for v in vs:
@@ -82,9 +96,53 @@ def _validate(args) -> int:
             print(f"{b} {topic}: {sev}: ... {k} more samples: {problem}")
         if not fail and not args.quiet:
             print(f"{b}: OK ({len(vs)} warnings)" if vs else f"{b}: OK")
+    if len(bags) > 1:  # across bags: hours per actuator never decrease, mission indices do not repeat
+        seq = _mission_sequence(bags)
+        for v in seq:
+            print(v)
+        n_bad += len({v.file for v in seq} - failed)
     if len(bags) > 1 and not args.quiet:
-        print(f"{len(bags) - n_bad}/{len(bags)} bags pass")
+        print(f"{max(len(bags) - n_bad, 0)}/{len(bags)} bags pass")
     return 1 if n_bad else 0
+
+
+def _recover(args) -> int:
+    import os
+
+    from hd_bag.mcapio import McapFormatError, recover_mcap
+
+    out = args.out or (os.path.splitext(args.bag)[0] + ".recovered.mcap")
+    try:
+        r = recover_mcap(args.bag, out)
+    except (McapFormatError, ValueError, OSError) as e:
+        print(f"hdphm bag recover: {args.bag}: {e}", file=sys.stderr)
+        return 2
+    for i in r["issues"]:
+        print(f"{args.bag}: {i}", file=sys.stderr)
+    print(f"{args.bag} -> {out}: {r['messages']} messages in {r['chunks']} chunks"
+          + (" (the input was already complete)" if r["complete_before"] else ""))
+    return 0
+
+
+def _mission_sequence(bags: list[str]):
+    """check_mission_sequence over the bags whose hd_mission metadata parses."""
+    import math
+    from types import SimpleNamespace
+
+    from hd_bag import BagError, read_metadata
+    from hd_bag.reader import check_mission_sequence
+
+    metas = []
+    for b in bags:
+        try:
+            md = read_metadata(b).get("hd_mission") or {}
+            m = SimpleNamespace(actuator_id=md["actuator_id"], mission_index=int(md["mission_index"]),
+                                operating_hours=float(md["operating_hours"]))
+        except (BagError, ValueError, KeyError, OSError):
+            continue  # the per-bag validation already reported it
+        if math.isfinite(m.operating_hours):
+            metas.append((b, m))
+    return check_mission_sequence(metas)
 
 
 def _split_kv(s: str, what: str) -> tuple[str, str]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import io
 import os
 import struct
+import threading
 import zlib
 from dataclasses import dataclass, field
 from typing import BinaryIO, Iterator
@@ -45,8 +46,22 @@ OP_DATA_END = 0x0F
 
 #: Message record fixed part: channel_id u16, sequence u32, log_time u64, publish_time u64.
 MSG_FIXED = 2 + 4 + 8 + 8
-#: Upper bound on a single record we accept (1 GiB): larger means corrupt length bytes.
-MAX_RECORD = 1 << 30
+#: Caps on every size read from a file (see docs/ROBUSTNESS.md "Caps"). They follow from the
+#: contract: the largest chunk a known writer produces is a few MiB (ours: 0.5 MiB or 1 s of log
+#: time, i.e. ~3 MiB at 20 kHz; the recorder: 20,000 messages; ``ros2 bag``: 768 KiB; ``mcap``:
+#: 1 MiB), so a chunk that decompresses to more than 64 MiB (20x the largest of them) is not a
+#: contract bag, it is a decompression bomb or corrupt length bytes.
+MAX_CHUNK_BYTES = 64 << 20
+#: Schema / Channel / Metadata / Header records: texts of a few KiB (JointState's schema with its
+#: dependencies: 0.5 KiB); 4 MiB leaves room for any real message definition.
+MAX_META_RECORD = 4 << 20
+#: One Message record outside a chunk (unchunked bags): contract messages are < 1 KiB.
+MAX_LOOSE_MESSAGE = 4 << 20
+#: Upper bound on a record's length field in the data section (a chunk record carries at most
+#: MAX_CHUNK_BYTES of compressed data plus its header): larger means corrupt length bytes.
+MAX_RECORD = MAX_CHUNK_BYTES + 4096
+#: opcodes the spec defines (0x80-0xFF are user records, skipped)
+VALID_OPS = frozenset(range(0x01, 0x10))
 
 
 class McapFormatError(ValueError):
@@ -116,34 +131,51 @@ def _compress(data: bytes, compression: str) -> bytes:
     raise ValueError(f"unsupported chunk compression {compression!r} (zstd, lz4 or none)")
 
 
-_ZC = None
-_ZD = None
+#: one zstd (de)compressor per thread: zstandard's objects are not thread-safe (two threads sharing one,
+#: e.g. a multi-threaded Dask worker reading two bags, get "Data corruption detected")
+_Z = threading.local()
 
 
 def _zstd_compressor():
-    global _ZC
-    if _ZC is None:
+    zc = getattr(_Z, "c", None)
+    if zc is None:
         import zstandard
 
-        _ZC = zstandard.ZstdCompressor(level=3)
-    return _ZC
+        zc = _Z.c = zstandard.ZstdCompressor(level=3)
+    return zc
 
 
 def _decompress(data: bytes, compression: str, size: int) -> bytes:
-    global _ZD
+    """Decompress a chunk, never producing more than ``size + 1`` bytes (``size``: the chunk's declared
+    uncompressed size, already checked against :data:`MAX_CHUNK_BYTES`): a frame that claims or expands
+    to more is cut there and the caller refuses the size mismatch, so a bomb costs at most the cap."""
     if compression == "":
         return data
     if compression == "zstd":
-        if _ZD is None:
+        zd = getattr(_Z, "d", None)
+        if zd is None:
             import zstandard
 
-            _ZD = zstandard.ZstdDecompressor()
-        return _ZD.decompress(data, max_output_size=size)
+            zd = _Z.d = zstandard.ZstdDecompressor()
+        with zd.stream_reader(io.BytesIO(data)) as r:
+            return _read_capped(r, size + 1)
     if compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(data)
+        with lz4.frame.open(io.BytesIO(data), "rb") as r:
+            return _read_capped(r, size + 1)
     raise McapFormatError(f"unsupported chunk compression {compression!r}")
+
+
+def _read_capped(r, n: int) -> bytes:
+    parts, got = [], 0
+    while got < n:
+        b = r.read(min(n - got, 1 << 22))
+        if not b:
+            break
+        parts.append(b)
+        got += len(b)
+    return b"".join(parts)
 
 
 # ---------------------------------------------------------------------------
@@ -347,6 +379,7 @@ class MessageBlock:
     log_time: np.ndarray  # uint64
     start: np.ndarray  # int64
     length: np.ndarray  # int64
+    loose: bool = False  # messages found outside chunks (``buf`` holds payloads only, no records)
 
 
 @dataclass
@@ -356,6 +389,7 @@ class ScanIssue:
     offset: int
     problem: str
     fatal: bool
+    severity: str = "error"  # error | warning (validate)
 
 
 @dataclass
@@ -367,6 +401,8 @@ class McapScan:
     library: str = ""
     issues: list[ScanIssue] = field(default_factory=list)
     complete: bool = False  # footer + closing magic seen
+    n_loose: int = 0  # Message records outside chunks (no CRC covers them)
+    n_unchecked: int = 0  # chunks whose CRC field is 0 (not computed)
 
 
 class _Cursor:
@@ -403,6 +439,8 @@ class _Cursor:
 
     def map_ss(self) -> dict[str, str]:
         end = self.u32() + self.p
+        if end > len(self.b):
+            raise struct.error("map runs past the end of its record")
         out = {}
         while self.p < end:
             k = self.s()
@@ -473,10 +511,10 @@ def _split_records(buf: bytes, where: str, scan: McapScan) -> MessageBlock:
             lens.append(ln)
         elif op == OP_SCHEMA:
             s = _parse_schema(buf[q:q + ln])
-            scan.schemas[s.id] = s
+            scan.schemas.setdefault(s.id, s)  # the first definition of an id stands (as for the data section)
         elif op == OP_CHANNEL:
             c = _parse_channel(buf[q:q + ln])
-            scan.channels[c.id] = c
+            scan.channels.setdefault(c.id, c)
         p = q + ln
     st = np.asarray(starts, np.int64)
     ln = np.asarray(lens, np.int64)
@@ -495,14 +533,81 @@ def _split_records(buf: bytes, where: str, scan: McapScan) -> MessageBlock:
     return MessageBlock(arr, ch, lt, st + MSG_FIXED, ln - MSG_FIXED)
 
 
+def _plausible_header(buf, p: int, size: int) -> bool:
+    """A record header at ``p`` of ``buf`` (the file from some base) whose opcode is defined and whose
+    length stays inside the file."""
+    if p + 9 > len(buf):
+        return False
+    op = buf[p]
+    if op not in VALID_OPS:
+        return False
+    ln = struct.unpack_from("<Q", buf, p + 1)[0]
+    return ln <= MAX_RECORD and p + 9 + ln <= size
+
+
+def _resync(f, start: int, size: int) -> int | None:
+    """Offset of the next record at or after ``start`` that begins a chain of valid records (two
+    plausible headers in a row, or one that ends exactly at the footer / end of file); None if none.
+
+    Used after a record whose header is damaged: compressed data almost never looks like two chained
+    headers (a defined opcode and a length whose top 5 bytes are zero, twice), so the first chain is
+    the real next record."""
+    import mmap
+
+    if start >= size:
+        return None
+    window = 1 << 24  # search 16 MiB at a time: memory stays bounded whatever the file size
+    with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+        for w0 in range(start, size, window):
+            arr = np.frombuffer(mm, np.uint8, count=min(window, size - w0), offset=w0)
+            cand = (np.flatnonzero((arr >= 0x01) & (arr <= 0x0F)) + w0).tolist()
+            del arr
+            for p in cand:
+                if not _plausible_header(mm, p, size):
+                    continue
+                ln = struct.unpack_from("<Q", mm, p + 1)[0]
+                q = p + 9 + ln
+                if q == size or (mm[p] == OP_FOOTER and q + 8 == size) or _plausible_header(mm, q, size):
+                    return p
+    return None
+
+
+def _cap_for(op: int) -> int:
+    if op == OP_CHUNK:
+        return MAX_RECORD
+    if op in (OP_SCHEMA, OP_CHANNEL, OP_METADATA, OP_HEADER):
+        return MAX_META_RECORD
+    if op == OP_MESSAGE:
+        return MAX_LOOSE_MESSAGE
+    return 1 << 62  # not read (seeked over): any length inside the file
+
+
+#: records the reader needs the content of (the others are seeked over: index and summary records
+#: only repeat what the data section holds, attachments are not contract data)
+_READ_OPS = frozenset((OP_HEADER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_METADATA, OP_FOOTER))
+#: records whose loss loses no data (indexes, statistics, summary offsets, attachments)
+_INDEX_OPS = frozenset((OP_MESSAGE_INDEX, OP_CHUNK_INDEX, OP_ATTACHMENT, OP_ATTACHMENT_INDEX, OP_STATISTICS,
+                        OP_METADATA_INDEX, OP_SUMMARY_OFFSET))
+
+
 def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_filter=None,
               validate_crc: bool = True) -> Iterator[MessageBlock]:
     """Stream an MCAP file chunk by chunk, yielding :class:`MessageBlock`.
 
     Schema, channel and metadata records fill ``scan`` as they are met (before
     the messages that use them, as the spec requires). ``chunk_filter`` is
-    reserved. Truncation is reported in ``scan.issues`` (non fatal, the
-    complete part is yielded); corruption raises :class:`McapFormatError`.
+    reserved. Findings go to ``scan.issues``; they do not stop the scan:
+
+    * truncation (the file ends inside a record, no closing magic): every complete record before
+      the cut is yielded;
+    * a damaged record header in the data section (undefined opcode, a length beyond the file or a
+      cap, while the file still ends with the closing magic or a valid record follows): the scan
+      resynchronises on the next chain of valid records (linear scan) and says how many bytes it
+      skipped and whether they held data or only an index;
+    * anything wrong after DataEnd (summary, footer): a warning; the data section is complete.
+
+    Corrupt *data* raise :class:`McapFormatError`: a chunk whose CRC does not match, which does not
+    decompress, or whose declared or actual size is beyond :data:`MAX_CHUNK_BYTES`.
     """
     path = os.fspath(path)
     scan = scan if scan is not None else McapScan()
@@ -513,8 +618,12 @@ def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_fi
             if len(magic) < 8 and MAGIC.startswith(magic):
                 raise McapFormatError(f"file is empty or cut inside the MCAP magic ({size} bytes)")
             raise McapFormatError("not an MCAP file (bad magic bytes at offset 0)")
+        f.seek(max(8, size - 8))
+        ends_with_magic = size >= 16 and f.read(8) == MAGIC
+        f.seek(8)
         pos = 8
         loose: list[tuple[int, int, bytes]] = []  # (channel, log_time, payload) outside chunks
+        data_end = False
 
         def flush_loose():
             if not loose:
@@ -523,31 +632,81 @@ def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_fi
             ln = np.array([len(p) for _, _, p in loose], np.int64)
             st = np.concatenate([[0], np.cumsum(ln)[:-1]]).astype(np.int64)
             blk = MessageBlock(np.frombuffer(buf, np.uint8), np.array([c for c, _, _ in loose], np.uint16),
-                               np.array([t for _, t, _ in loose], np.uint64), st, ln)
+                               np.array([t for _, t, _ in loose], np.uint64), st, ln, True)
             loose.clear()
             return blk
 
+        def summary_issue(problem: str) -> None:
+            scan.issues.append(ScanIssue(pos, f"summary/footer damaged: {problem}; the data section was read "
+                                              "completely (ends with DataEnd), the summary is not needed",
+                                         False, "warning"))
+
         while True:
+            f.seek(pos)
             hdr = f.read(9)
             if len(hdr) == 0:
-                scan.issues.append(ScanIssue(pos, "file ends without footer/closing magic (truncated: "
-                                                  "recording was interrupted?); all complete records were read",
-                                             False))
+                if data_end:
+                    summary_issue(f"file ends at byte {pos} without footer/closing magic")
+                else:
+                    scan.issues.append(ScanIssue(pos, "file ends without footer/closing magic (truncated: "
+                                                      "recording was interrupted?); all complete records were "
+                                                      "read", False))
                 break
             if len(hdr) < 9:
-                scan.issues.append(ScanIssue(pos, f"file truncated inside a record header at byte {pos} "
-                                                  f"of {size}; the records before it were read", False))
+                if data_end:
+                    summary_issue(f"file ends inside a record header at byte {pos}")
+                else:
+                    scan.issues.append(ScanIssue(pos, f"file truncated inside a record header at byte {pos} "
+                                                      f"of {size}; the records before it were read", False))
                 break
             op, ln = struct.unpack("<BQ", hdr)
-            if ln > MAX_RECORD or (op == 0 or op > 0x0F and op < 0x80):
-                raise McapFormatError(f"corrupt record at byte {pos}: opcode 0x{op:02x}, length {ln}")
-            if pos + 9 + ln > size:
-                scan.issues.append(ScanIssue(pos, f"file truncated inside a record (opcode 0x{op:02x}) at byte "
-                                                  f"{pos} of {size}: its {ln} bytes are not all there; the "
-                                                  "records before it were read", False))
-                break
-            content = f.read(ln)
+            defined = op in VALID_OPS or op >= 0x80
+            overrun = pos + 9 + ln > size
+            if data_end:
+                if not defined or overrun:
+                    summary_issue(f"record at byte {pos} has opcode 0x{op:02x} and length {ln} (file: {size} bytes)")
+                    break
+                if op == OP_FOOTER:
+                    f.seek(pos + 9 + ln)
+                    if f.read(8) != MAGIC:
+                        summary_issue("closing magic missing or damaged after the footer")
+                    else:
+                        scan.complete = True
+                    break
+                pos += 9 + ln
+                continue
+            if not defined or overrun or ln > _cap_for(op):
+                cut = overrun and defined and not ends_with_magic
+                nxt = None if cut else _resync(f, pos + 1, size)
+                if nxt is None:
+                    if cut or overrun:
+                        scan.issues.append(ScanIssue(pos, f"file truncated inside a record (opcode 0x{op:02x}) at "
+                                                          f"byte {pos} of {size}: its {ln} bytes are not all there; "
+                                                          "the records before it were read", False))
+                        break
+                    if ln > _cap_for(op) and defined:
+                        raise McapFormatError(f"record at byte {pos} (opcode 0x{op:02x}) declares {ln} bytes, above "
+                                              f"the cap of {_cap_for(op)} bytes for this record kind")
+                    raise McapFormatError(f"corrupt record at byte {pos}: opcode 0x{op:02x}, length {ln}, and no "
+                                          "valid record after it")
+                index_only = op in _INDEX_OPS
+                scan.issues.append(ScanIssue(
+                    pos, f"corrupt record header at byte {pos} (opcode 0x{op:02x}, length {ln}"
+                         + (f", beyond the file's {size} bytes" if overrun else "") + "): not a truncation (the file "
+                         f"{'ends with the closing magic' if ends_with_magic else 'goes on with valid records'}); "
+                         f"skipped {nxt - pos} bytes to the next valid record at byte {nxt}"
+                         + ("; the damaged record was an index record, no data lost" if index_only else
+                            "; messages in the skipped bytes are lost (dropouts show where)"),
+                    False, "warning" if index_only else "error"))
+                pos = nxt
+                continue
             where = f"record at byte {pos}"
+            if op not in _READ_OPS:
+                if op == OP_DATA_END:
+                    data_end = True
+                pos += 9 + ln
+                continue
+            content = f.read(ln)
             pos += 9 + ln
             try:
                 if op == OP_CHUNK:
@@ -560,6 +719,10 @@ def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_fi
                     crc = cu.u32()
                     comp = cu.s()
                     clen = cu.u64()
+                    if usize > MAX_CHUNK_BYTES:
+                        raise McapFormatError(f"chunk {where} declares {usize} uncompressed bytes, above the cap "
+                                              f"of {MAX_CHUNK_BYTES} (MAX_CHUNK_BYTES; contract writers make chunks "
+                                              "of a few MiB): decompression bomb or corrupt size")
                     data = cu.raw(clen)
                     try:
                         body = _decompress(data, comp, usize)
@@ -568,14 +731,18 @@ def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_fi
                     except Exception as e:  # zstd/lz4 errors have no common base
                         raise McapFormatError(f"chunk {where} cannot be decompressed ({comp}): {e}") from None
                     if len(body) != usize:
-                        raise McapFormatError(f"chunk {where}: decompressed to {len(body)} bytes, header "
-                                              f"says {usize}")
+                        raise McapFormatError(f"chunk {where}: decompresses to "
+                                              f"{'more than ' if len(body) > usize else ''}{len(body)} bytes, "
+                                              f"header says {usize}")
+                    if not crc:
+                        scan.n_unchecked += 1
                     if validate_crc and crc and zlib.crc32(body) != crc:
                         raise McapFormatError(f"chunk {where}: CRC mismatch (corrupt bytes)")
                     yield _split_records(body, f"chunk {where}", scan)
                 elif op == OP_MESSAGE:
                     cid, _seq, lt, _pt = struct.unpack_from("<HIQQ", content, 0)
                     loose.append((cid, lt, content[MSG_FIXED:]))
+                    scan.n_loose += 1
                 elif op == OP_SCHEMA:
                     s = _parse_schema(content)
                     scan.schemas.setdefault(s.id, s)
@@ -601,6 +768,12 @@ def scan_mcap(path: str | os.PathLike, scan: McapScan | None = None, *, chunk_fi
         blk = flush_loose()
         if blk is not None:
             yield blk
+    if scan.n_loose or scan.n_unchecked:
+        what = (f"{scan.n_loose} messages outside chunks" if scan.n_loose else "") + \
+               (" and " if scan.n_loose and scan.n_unchecked else "") + \
+               (f"{scan.n_unchecked} chunks without a CRC" if scan.n_unchecked else "")
+        scan.issues.append(ScanIssue(0, f"{what}: MCAP has no checksum for these bytes, so a flipped bit cannot be "
+                                        "detected; values are only plausibility-checked", False, "warning"))
 
 
 def read_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
@@ -610,7 +783,8 @@ def read_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
     messages) up to DataEnd. For consumers that need ``hd_mission`` *before* the messages:
     other tools (``mcap-ros2-support``, ``rosbags``, ``ros2 bag``) write metadata records
     after the chunks, so a streaming reader only meets them at the end. Raises
-    :class:`McapFormatError` on a non-MCAP file; a truncated file gives what precedes the cut.
+    :class:`McapFormatError` (naming the byte) on a non-MCAP file or a damaged metadata record;
+    a truncated file gives what precedes the cut.
     """
     out: dict[str, dict[str, str]] = {}
     size = os.path.getsize(path)
@@ -624,7 +798,13 @@ def read_metadata(path: str | os.PathLike) -> dict[str, dict[str, str]]:
             if op == OP_DATA_END or op == OP_FOOTER or pos + 9 + ln > size:
                 break
             if op == OP_METADATA:
-                name, md = _parse_metadata(f.read(ln))
+                if ln > MAX_META_RECORD:
+                    raise McapFormatError(f"metadata record at byte {pos} declares {ln} bytes, above the cap of "
+                                          f"{MAX_META_RECORD}")
+                try:
+                    name, md = _parse_metadata(f.read(ln))
+                except (struct.error, UnicodeDecodeError) as e:
+                    raise McapFormatError(f"corrupt metadata record at byte {pos}: {e}") from None
                 out[name] = md
             pos += 9 + ln
     return out
@@ -650,3 +830,65 @@ def gather_rows(block: MessageBlock, sel: np.ndarray, width: int) -> np.ndarray:
 
 __all__ = ["McapFileWriter", "McapFormatError", "McapScan", "MessageBlock", "scan_mcap", "message_records",
            "payloads", "gather_rows", "io"]
+
+
+def recover_mcap(src: str | os.PathLike, dst: str | os.PathLike, compression: str = "zstd") -> dict:
+    """Write a finalised copy of an MCAP file that lacks its summary/footer (a recorder killed with
+    SIGKILL, a power cut): every complete chunk and loose message before the cut, with the schemas,
+    channels and metadata met before it, then DataEnd, summary and footer, so any MCAP reader
+    (``mcap.reader.make_reader``, ``ros2 bag``) opens it. Damaged records in the data section are
+    skipped as :func:`scan_mcap` does. Returns counts and the scan's issues. ``dst`` must differ from
+    ``src``."""
+    src, dst = os.fspath(src), os.fspath(dst)
+    if os.path.abspath(src) == os.path.abspath(dst):
+        raise ValueError(f"{dst}: recovery writes a new file; give another output path")
+    scan = McapScan()
+    w = None
+    n_msgs = n_chunks = 0
+    seen_s: set[int] = set()
+    seen_c: set[int] = set()
+    seen_m: set[str] = set()
+
+    def sync():
+        nonlocal w
+        if w is None:
+            w = McapFileWriter(dst, profile=scan.profile or "ros2", library=(scan.library or "") + " (recovered)",
+                               compression=compression)
+        for sid, s in scan.schemas.items():
+            if sid not in seen_s:
+                w.add_schema(sid, s.name, s.encoding, s.data)
+                seen_s.add(sid)
+        for cid, c in scan.channels.items():
+            if cid not in seen_c:
+                w.add_channel(cid, c.schema_id, c.topic, c.message_encoding, c.metadata)
+                seen_c.add(cid)
+        for name, md in scan.metadata.items():
+            if name not in seen_m:
+                w.add_metadata(name, md)
+                seen_m.add(name)
+
+    try:
+        for blk in scan_mcap(src, scan):
+            sync()
+            blocks = []
+            for cid in np.unique(blk.channel).tolist():
+                sel = np.flatnonzero(blk.channel == cid)
+                st = blk.start[sel] - MSG_FIXED - 9
+                en = blk.start[sel] + blk.length[sel]
+                buf = blk.buf
+                if blk.loose:  # messages outside chunks: rebuild their records
+                    recs = [_record(OP_MESSAGE, struct.pack("<HIQQ", cid, 0, int(t), int(t)) + buf[s:s + n].tobytes())
+                            for s, n, t in zip(blk.start[sel].tolist(), blk.length[sel].tolist(),
+                                               blk.log_time[sel].tolist())]
+                else:
+                    recs = [buf[a:b].tobytes() for a, b in zip(st.tolist(), en.tolist())]
+                blocks.append((cid, blk.log_time[sel], recs))
+                n_msgs += len(sel)
+            w.write_chunk(blocks)
+            n_chunks += 1
+        sync()
+    finally:
+        if w is not None:
+            w.close()
+    return {"messages": n_msgs, "chunks": n_chunks, "complete_before": scan.complete,
+            "issues": [i.problem for i in scan.issues]}

@@ -88,6 +88,7 @@ class ReadReport:
     #: a common zero, speeds not the derivative of the angles, Q_red sign): results derived from
     #: this mission are doubtful; commands that use it repeat these lines in their output
     suspect: list[str] = field(default_factory=list)
+    gear_ratio_encoders: float = float("nan")  # theta_m / theta_f slope seen by the encoders
 
     def summary(self) -> str:
         lines = [f"{self.path}:"]

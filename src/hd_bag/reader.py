@@ -9,11 +9,13 @@ checked against ``../shared/CONTRACT.md``:
 What is *fatal* (``read_mission`` raises :class:`BagError`; ``validate_bag``
 reports an error):
   not an MCAP file; corrupt bytes (CRC mismatch, undecodable chunk, impossible
-  record); no ``/hd/joint_states`` (or fewer than 2 usable samples); a contract
+  record); a size beyond its cap (``mcapio.MAX_CHUNK_BYTES`` declared or decompressed,
+  record lengths); no ``/hd/joint_states`` (or fewer than 2 usable samples); a contract
   topic with the wrong message type or encoding; JointState without the
   ``motor``/``output`` joints; missing ``hd_mission`` metadata, a missing
   required key, an unparsable or absurd value (gear ratio <= 0, k_t <= 0,
-  non-finite numbers, unknown source or contract version); grossly
+  non-finite numbers, operating hours above 1e6 h, an ``actuator_id`` that is not a
+  safe file name, unknown source or contract version); grossly
   non-monotonic stamps (a backward jump of more than 50 sample periods, more
   than 10 % of samples out of order, or most stamps repeated: the stamp clock
   is broken, re-sorting would invent a history); more than 1 % of a signal
@@ -21,6 +23,11 @@ reports an error):
 
 What the reader *repairs and reports* (``Mission.report``; validate: warning
 unless noted): a truncated file (complete chunks recovered; validate: error),
+a damaged record header in the data section (linear resync on the next valid
+record; an index record lost: warning, a chunk lost: error), a damaged
+summary or footer (the data section is complete: warning), messages above
+:data:`MAX_MESSAGE_BYTES` (not decoded; validate: error), bags or chunks
+without a CRC (warning; isolated bit-flip spikes read as NaN, validate: error),
 slightly out-of-order samples (re-sorted), duplicate stamps (first kept),
 dropouts (``report.gaps``, ``Mission.segment`` split at gaps > 10 samples,
 never interpolated), NaN (kept), isolated values beyond physical limits (set to
@@ -37,7 +44,12 @@ mistakes do: ``theta_f - theta_m / N`` beyond ``MAX_TWIST_OFFSET`` (encoders
 without a common zero), speeds that are not the derivative of the angles
 (``SPEED_SCALE_BAND``: rpm, deg/s, reversed sign), ``Q_red`` anti-correlated
 with the wind-up (torque sensor sign; validate: warning, the contract page does
-not state that sign).
+not state that sign), a ``gear_ratio`` the encoders contradict (slope of
+theta_m on theta_f beyond :data:`GEAR_RATIO_TOLERANCE`: the metadata has no CRC).
+
+Nothing a file names is imported or executed: contract types are decoded with
+this package's fixed schemas (``cdr.SCHEMAS``), :func:`iter_messages` maps type
+names through a fixed table and yields other types as :class:`RawMessage`.
 """
 
 from __future__ import annotations
@@ -84,6 +96,28 @@ MAX_BACKWARD_PERIODS = 50
 MAX_REORDERED_FRACTION = 0.10
 MAX_ABSURD_FRACTION = 0.01
 _MAX_LAYOUTS = 8
+#: Largest serialised message accepted per contract type, checked *before* decoding (a 9 KB zstd
+#: chunk can hold one JointState of 10^7 doubles). A contract JointState has 2 joints (~130 bytes);
+#: the cap allows cdr.MAX_JOINTS joints with 256-byte names and three arrays of doubles (~25 KiB);
+#: a Temperature has one frame id; /sim/effects is a JSON list of a few effects.
+MAX_MESSAGE_BYTES = {
+    "sensor_msgs/msg/JointState": 64 << 10,
+    "sensor_msgs/msg/Temperature": 4 << 10,
+    "std_msgs/msg/String": 1 << 20,
+}
+#: Relative mismatch between the gear ratio seen by the encoders (slope of theta_m against theta_f
+#: over moving stretches) and the metadata's ``gear_ratio`` beyond which validate reports an error.
+#: Compliance and kinematic error move the slope by well under 1 % (theta_m = N theta_f + twist,
+#: twist ~ 1e-3 rad against output strokes of 0.1-1 rad); a wrong N (101 vs 181, 100 vs 1) is off by
+#: tens of percent or more.
+GEAR_RATIO_TOLERANCE = 0.05
+#: rad of output motion per ~10 ms increment below which an increment does not count as moving for the
+#: gear-ratio check (0.1 rad/s at the output: twist changes over 10 ms are far smaller).
+MIN_OUTPUT_INCREMENT = 1e-3
+#: An isolated sample is a bit flip (bags without a CRC only) when it leaves the line through its two
+#: neighbours by more than this many robust sigmas of the signal's sample-to-sample steps while the
+#: neighbours agree with each other.
+SPIKE_SIGMAS = 50.0
 
 
 # ---------------------------------------------------------------------------
@@ -162,7 +196,7 @@ def _layout_groups(block: MessageBlock, sel: np.ndarray, first_index: int, match
             yield "fast", rows[m], sub_idx[m], lay
             left &= ~m
         if left.any():
-            dec = cdr.generic_decoder(schema.name, schema.data)
+            dec = cdr.generic_decoder(schema)
             for data, ii in zip(payloads(block, sub[left]), sub_idx[left].tolist()):
                 yield "generic", dec(data), np.array([ii]), None
 
@@ -228,6 +262,20 @@ def _decode_temp(block: MessageBlock, sel: np.ndarray, first_index: int, acc: _T
             acc.frame.append(str(r.header.frame_id))
 
 
+def _decode_topic(raw: _Raw, block: MessageBlock, sel: np.ndarray, first: int, topic: str, schema) -> None:
+    """Decode messages ``sel`` of a checked contract (or /sim) channel as the type the contract fixes
+    for ``topic`` (never as a type the file names: the schema was checked against it)."""
+    typ = EXPECTED_TYPES[topic]
+    if typ == "sensor_msgs/msg/JointState":
+        _decode_js(block, sel, first, raw.js.setdefault(topic, _JSAcc()), typ)
+    elif typ == "sensor_msgs/msg/Temperature":
+        _decode_temp(block, sel, first, raw.temp, typ)
+    else:  # std_msgs/String (/sim/effects)
+        dec = cdr.generic_decoder(typ)
+        for data, lt in zip(payloads(block, sel), block.log_time[sel].tolist()):
+            raw.strings.setdefault(topic, []).append((int(lt), dec(data).data))
+
+
 def _scan(path: str, include_sim: bool) -> _Raw:
     if not os.path.exists(path):
         raise BagError(path, "no such file")
@@ -275,14 +323,21 @@ def _scan(path: str, include_sim: bool) -> _Raw:
                         raw.problems.append(_Problem(topic, None, "channel has no offered_qos_profiles metadata "
                                                      "(the contract's writers add it; readers do not need it)",
                                                      "warning"))
-                if schema.name.endswith("JointState"):
-                    _decode_js(block, sel, first, raw.js.setdefault(topic, _JSAcc()), schema)
-                elif schema.name.endswith("Temperature"):
-                    _decode_temp(block, sel, first, raw.temp, schema)
-                else:  # std_msgs/String (/sim/effects)
-                    dec = cdr.generic_decoder(schema.name, schema.data)
-                    for data, lt in zip(payloads(block, sel), block.log_time[sel].tolist()):
-                        raw.strings.setdefault(topic, []).append((int(lt), dec(data).data))
+                typ = EXPECTED_TYPES[topic]
+                cap = MAX_MESSAGE_BYTES[typ]
+                big = block.length[sel] > cap
+                if not big.any():
+                    _decode_topic(raw, block, sel, first, topic, schema)
+                    continue
+                raw.problems.append(_Problem(topic, first + np.flatnonzero(big),
+                                             f"message of {int(block.length[sel][big].max())} bytes is above the "
+                                             f"cap of {cap} bytes for a {typ} (MAX_MESSAGE_BYTES; contract: "
+                                             f"2 joints, cap {cdr.MAX_JOINTS}); not decoded"))
+                # decode the others run by run, so each keeps its message index on the topic
+                keep = np.concatenate([[False], ~big, [False]]).astype(np.int8)
+                edges = np.flatnonzero(np.diff(keep))
+                for a_, b_ in zip(edges[0::2].tolist(), edges[1::2].tolist()):
+                    _decode_topic(raw, block, sel[a_:b_], first + a_, topic, schema)
     except McapFormatError as e:
         raise BagError(path, str(e)) from None
     except Exception as e:  # generic decoder on garbage bytes and similar
@@ -290,7 +345,7 @@ def _scan(path: str, include_sim: bool) -> _Raw:
             raise
         raise BagError(path, f"undecodable message data ({type(e).__name__}: {e})") from None
     for iss in raw.scan.issues:
-        raw.problems.append(_Problem(None, None, iss.problem, "error", iss.fatal))
+        raw.problems.append(_Problem(None, None, iss.problem, iss.severity, iss.fatal))
     if raw.scan.profile and raw.scan.profile != "ros2":
         raw.problems.append(_Problem(None, None, f"MCAP profile {raw.scan.profile!r} (contract: ros2)"))
     return raw
@@ -447,6 +502,8 @@ def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: fl
             raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg))
             rep.notes.append(msg)
             rep.suspect.append(msg)
+    if N is None:
+        return
     wu = M[:, 0] / N - M[:, 1]
     ok = np.isfinite(wu) & np.isfinite(M[:, 5])
     if ok.sum() >= 50 and np.std(wu[ok]) > 0 and np.std(M[ok, 5]) > 0:
@@ -459,6 +516,99 @@ def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: fl
             raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg, "warning"))
             rep.notes.append(msg)
             rep.suspect.append(msg)
+
+
+def gear_ratio_from_encoders(t: np.ndarray, theta_m: np.ndarray, theta_f: np.ndarray) -> tuple[float, int]:
+    """(N, number of increments used): least-squares slope of theta_m increments on theta_f increments
+    over ~10 ms, on moving stretches only (|d theta_f| above 10 % of its 95th percentile and above
+    :data:`MIN_OUTPUT_INCREMENT`); NaN when the output barely moves (fewer than 50 such increments)."""
+    n = len(t)
+    if n < 20:
+        return float("nan"), 0
+    L = max(1, int(round(0.01 / max(float(np.median(np.diff(t))), 1e-9))))
+    if n <= 4 * L:
+        return float("nan"), 0
+    dm = theta_m[L:] - theta_m[:-L]
+    df = theta_f[L:] - theta_f[:-L]
+    ok = np.isfinite(dm) & np.isfinite(df)
+    if ok.sum() < 50:
+        return float("nan"), 0
+    # moving: above 10 % of the typical stroke and above MIN_OUTPUT_INCREMENT, so encoder noise and the
+    # transmission's twist (~1e-3 rad in all) cannot set the slope of a standstill
+    thr = max(0.1 * np.percentile(np.abs(df[ok]), 95), MIN_OUTPUT_INCREMENT)
+    mov = ok & (np.abs(df) > thr)
+    k = int(mov.sum())
+    if k < 50:
+        return float("nan"), k
+    return float(np.sum(dm[mov] * df[mov]) / np.sum(df[mov] ** 2)), k
+
+
+def _gear_ratio_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: float) -> bool:
+    """Metadata carries no checksum: compare its gear_ratio with the ratio the encoders show. Returns
+    False (and reports an error + suspect) on a mismatch beyond :data:`GEAR_RATIO_TOLERANCE`."""
+    n_hat, k = gear_ratio_from_encoders(t, M[:, 0], M[:, 1])
+    rep.gear_ratio_encoders = n_hat
+    if not math.isfinite(n_hat):
+        rep.notes.append("gear_ratio not checked against the encoders: the output barely moves in this mission")
+        return True
+    if abs(n_hat - N) <= GEAR_RATIO_TOLERANCE * abs(N):
+        return True
+    msg = (f"metadata gear_ratio = {N:g} but the encoders show theta_m / theta_f = {n_hat:.4g} (slope over {k} "
+           f"moving 10 ms increments; tolerance {GEAR_RATIO_TOLERANCE:.0%}): the metadata is wrong (a flipped "
+           "bit, another actuator's record) or theta_m is not the motor angle; twist, wind-up and stiffness "
+           "checks skipped")
+    raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg))
+    rep.notes.append(msg)
+    rep.suspect.append(msg)
+    return False
+
+
+def _spike_check(raw: _Raw, rep: ReadReport, M: np.ndarray, index: np.ndarray) -> None:
+    """Bags without a CRC (unchunked, or chunk CRC 0): isolated samples that leave the line through
+    their neighbours by more than :data:`SPIKE_SIGMAS` robust sigmas of the steps while the neighbours
+    agree (a flipped exponent bit) are reported as errors and read as NaN."""
+    if len(M) < 20:
+        return
+    for c, nm in enumerate(JOINT_SIGNALS):
+        x = M[:, c]
+        d1 = np.diff(x)
+        f1 = d1[np.isfinite(d1)]
+        if len(f1) < 10:
+            continue
+        sig = 1.4826 * float(np.median(np.abs(f1 - np.median(f1))))
+        scale = float(np.nanmedian(np.abs(x))) if np.isfinite(x).any() else 0.0
+        sig = max(sig, 1e-9 * max(scale, 1.0))
+        a, b, m_ = x[:-2], x[2:], x[1:-1]
+        dev = np.abs(m_ - 0.5 * (a + b))
+        bad = (dev > SPIKE_SIGMAS * sig) & (np.abs(b - a) < 5.0 * sig + np.abs(np.median(f1)) * 2)
+        bad &= np.isfinite(dev)
+        nb = int(bad.sum())
+        if nb:
+            ii = np.flatnonzero(bad) + 1
+            raw.problems.append(_Problem(TOPIC_JOINT_STATES, index[ii],
+                                         f"{nm}: {nb} isolated samples leave the line through their neighbours by "
+                                         f"more than {SPIKE_SIGMAS:g} robust sigmas (e.g. {float(x[ii[0]])!r} between "
+                                         f"{float(x[ii[0] - 1])!r} and {float(x[ii[0] + 1])!r}); this bag has no CRC, "
+                                         "so they are taken as corrupt bytes (read as NaN)"))
+            rep.notes.append(f"{nm}: {nb} isolated corrupt-looking samples read as NaN (bag without CRC)")
+            M[ii, c] = np.nan
+
+
+def check_mission_sequence(metas: list[tuple[str, MissionMeta]]) -> list[Violation]:
+    """Across bags: per actuator, operating_hours must not decrease as mission_index grows (the same
+    mission in two files, e.g. a copy, is not a finding). ``metas``: (path, meta) pairs; returns error
+    violations naming the later file of each offending pair."""
+    out: list[Violation] = []
+    by_act: dict[str, list[tuple[int, float, str]]] = {}
+    for path, m in metas:
+        by_act.setdefault(m.actuator_id, []).append((int(m.mission_index), float(m.operating_hours), path))
+    for act, rows in by_act.items():
+        rows.sort(key=lambda r: (r[0], r[1]))
+        for (i0, h0, p0), (i1, h1, p1) in zip(rows, rows[1:]):
+            if i1 > i0 and h1 < h0:
+                out.append(Violation(p1, None, None, f"actuator {act!r}: operating_hours {h1:g} at mission {i1} is "
+                                                      f"below {h0:g} at mission {i0} ({p0}): hours must not decrease"))
+    return out
 
 
 def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
@@ -544,7 +694,10 @@ def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
                          f"report.gaps; not interpolated; {int(big.sum())} gaps longer than "
                          f"{MAX_INTERP_GAP_SAMPLES} samples split the mission into {int(segment[-1]) + 1} segments")
     rep.nominal_dt = dt
-    if meta is not None:
+    if raw.scan.n_loose or raw.scan.n_unchecked:
+        _spike_check(raw, rep, M, index[order][keep])
+    ratio_ok = meta is not None and _gear_ratio_check(raw, rep, (s - s[0]) * 1e-9, M, float(meta.gear_ratio))
+    if meta is not None and ratio_ok:
         tw = M[:, 1] - M[:, 0] / float(meta.gear_ratio)
         tw = tw[np.isfinite(tw)]
         if len(tw):
@@ -558,6 +711,8 @@ def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
                 rep.notes.append(msg)
                 rep.suspect.append(msg)
         _consistency(raw, rep, (s - s[0]) * 1e-9, M, float(meta.gear_ratio))
+    elif meta is not None:  # a wrong N makes the twist and wind-up checks misleading: only the speed checks
+        _consistency(raw, rep, (s - s[0]) * 1e-9, M, None)
     rep.n_nan = {nm: int(np.isnan(M[:, c]).sum()) for c, nm in enumerate(JOINT_SIGNALS)}
     t0 = int(s[0])
     t = (s - t0) * 1e-9
@@ -642,7 +797,7 @@ def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
         if eff:
             try:
                 sim[TOPIC_SIM_EFFECTS] = json.loads(eff[-1][1])
-            except json.JSONDecodeError as e:
+            except (json.JSONDecodeError, RecursionError) as e:
                 raise BagError(path, f"/sim/effects is not valid JSON: {e}") from None
     return Mission(meta=meta, t=t, theta_m=M[:, 0].copy(), theta_f=M[:, 1].copy(), omega_m=M[:, 2].copy(),
                    omega_f=M[:, 3].copy(), tau_m=M[:, 4].copy(), Q_red=M[:, 5].copy(), t_cmd=t_cmd,
@@ -705,16 +860,49 @@ def validate_bag(path: str | os.PathLike) -> list[Violation]:
 _ROS_CLASSES: dict[str, Any] = {}
 
 
-def _ros_class(type_name: str):
-    if type_name not in _ROS_CLASSES:
-        try:
-            import importlib
+def _import_sensor_msgs():
+    from sensor_msgs import msg
 
-            pkg, sub, name = type_name.split("/")
-            _ROS_CLASSES[type_name] = getattr(importlib.import_module(f"{pkg}.{sub}"), name)
-        except Exception:  # no ROS wheels, or a type whose package is not installed
+    return msg
+
+
+def _import_std_msgs():
+    from std_msgs import msg
+
+    return msg
+
+
+#: The only message types :func:`iter_messages` deserialises: type name -> (fixed importer, class name).
+#: A bag's schema name is looked up here and never used to import anything (a schema named
+#: ``evilpkg/msg/JointState`` is a foreign type, yielded as :class:`RawMessage`).
+_ROS_TYPES = {
+    "sensor_msgs/msg/JointState": (_import_sensor_msgs, "JointState"),
+    "sensor_msgs/msg/Temperature": (_import_sensor_msgs, "Temperature"),
+    "std_msgs/msg/String": (_import_std_msgs, "String"),
+}
+
+
+def _ros_class(type_name: str):
+    """The rclpy class of a type of the fixed table (None: not in the table, or no ROS wheels)."""
+    if type_name not in _ROS_TYPES:
+        return None
+    if type_name not in _ROS_CLASSES:
+        imp, name = _ROS_TYPES[type_name]
+        try:
+            _ROS_CLASSES[type_name] = getattr(imp(), name)
+        except Exception:  # no ROS wheels
             _ROS_CLASSES[type_name] = None
     return _ROS_CLASSES[type_name]
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """A message of a type outside the reader's fixed table: its bytes and its schema, undecoded."""
+
+    type_name: str
+    schema_encoding: str
+    schema: bytes
+    data: bytes
 
 
 def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None, *, ros: bool = True
@@ -728,6 +916,9 @@ def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None, 
     else the log time. Order: sorted within each chunk and merged across
     chunks whose time ranges overlap their neighbours (a bag whose chunks
     overlap by more than one chunk is yielded in near, not exact, order).
+    Types outside the reader's fixed table (JointState, Temperature, String) are
+    never imported nor decoded: they come as :class:`RawMessage` (bytes and
+    schema). A message above :data:`MAX_MESSAGE_BYTES` raises :class:`BagError`.
     """
     path = os.fspath(path)
     want = set(topics) if topics is not None else None
@@ -742,10 +933,17 @@ def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None, 
     seq = 0
 
     def decode(topic: str, schema, data: bytes):
-        cls = _ros_class(cdr.normalise_type(schema.name)) if deser is not None else None
+        typ = cdr.normalise_type(schema.name)
+        if typ not in cdr.SCHEMAS or schema.encoding != "ros2msg":
+            return RawMessage(schema.name, schema.encoding, schema.data, data)
+        cap = MAX_MESSAGE_BYTES.get(typ, 0)
+        if len(data) > cap:
+            raise BagError(path, f"{topic}: a {typ} message of {len(data)} bytes is above the cap of {cap} bytes "
+                                 "(MAX_MESSAGE_BYTES)")
+        cls = _ros_class(typ) if deser is not None else None
         if cls is not None:
             return deser(data, cls)
-        return cdr.generic_decoder(schema.name, schema.data)(data)
+        return cdr.generic_decoder(typ)(data)
 
     try:
         for block in scan_mcap(path, scan):
@@ -761,18 +959,22 @@ def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None, 
                 if ch is None or (want is not None and ch.topic not in want):
                     continue
                 schema = scan.schemas.get(ch.schema_id)
-                if schema is None or schema.encoding != "ros2msg":
+                if schema is None:
                     continue
                 s0 = int(block.start[i])
                 data = block.buf[s0:s0 + int(block.length[i])].tobytes()
                 msg = decode(ch.topic, schema, data)
-                hdr = getattr(msg, "header", None)
+                hdr = None if isinstance(msg, RawMessage) else getattr(msg, "header", None)
                 lt = int(block.log_time[i])
                 st = int(hdr.stamp.sec) * 1_000_000_000 + int(hdr.stamp.nanosec) if hdr is not None else lt
                 heapq.heappush(heap, (lt, seq, ch.topic, st, msg))
                 seq += 1
     except McapFormatError as e:
         raise BagError(path, str(e)) from None
+    except BagError:
+        raise
+    except Exception as e:  # rclpy / generic decoder on garbage bytes
+        raise BagError(path, f"undecodable message data ({type(e).__name__}: {e})") from None
     while heap:
         lt, _, topic, st, msg = heapq.heappop(heap)
         yield topic, st, lt, msg

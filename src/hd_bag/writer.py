@@ -82,6 +82,30 @@ def _stamps(stamp_ns: Any) -> np.ndarray:
     return s
 
 
+#: Operating hours above this are not an actuator's (114 years of continuous running).
+MAX_OPERATING_HOURS = 1e6
+#: mission_index above this is not a plausible life (10^7 missions).
+MAX_MISSION_INDEX = 10_000_000
+MAX_ID_LENGTH = 128
+
+
+def safe_identifier(value: str, what: str = "actuator_id") -> str | None:
+    """Why ``value`` cannot be used as a file name component (None when it can): identifiers end up in
+    archive and recorder file names, so no path separators, no '..', no control characters."""
+    v = str(value)
+    if not v.strip():
+        return f"{what} is empty"
+    if len(v) > MAX_ID_LENGTH:
+        return f"{what} is {len(v)} characters long (at most {MAX_ID_LENGTH})"
+    if "/" in v or "\\" in v:
+        return f"{what} = {v[:40]!r} contains a path separator"
+    if ".." in v or v in (".",):
+        return f"{what} = {v[:40]!r} contains '..' (not a safe file name)"
+    if any(ord(c) < 32 or ord(c) == 127 for c in v):
+        return f"{what} = {v[:40]!r} contains control characters"
+    return None
+
+
 def check_meta(meta: MissionMeta, where: str = "") -> list[str]:
     """Problems with a metadata record's values (empty when fine)."""
     p = []
@@ -96,10 +120,15 @@ def check_meta(meta: MissionMeta, where: str = "") -> list[str]:
             p.append(f"torque_constant = {meta.torque_constant!r} N*m/A is not physical (need 0 < k_t <= 100)")
         if meta.operating_hours < 0:
             p.append(f"operating_hours = {meta.operating_hours!r} is negative")
+        elif meta.operating_hours > MAX_OPERATING_HOURS:
+            p.append(f"operating_hours = {meta.operating_hours!r} is not plausible (> {MAX_OPERATING_HOURS:g} h)")
     if int(meta.mission_index) < 0:
         p.append(f"mission_index = {meta.mission_index!r} is negative")
-    if not str(meta.actuator_id).strip():
-        p.append("actuator_id is empty")
+    elif int(meta.mission_index) > MAX_MISSION_INDEX:
+        p.append(f"mission_index = {meta.mission_index!r} is not plausible (> {MAX_MISSION_INDEX})")
+    why = safe_identifier(meta.actuator_id)
+    if why:
+        p.append(why)
     if meta.source not in ("simulation", "test_bench", "flight"):
         p.append(f"source = {meta.source!r} (need simulation, test_bench or flight)")
     return p

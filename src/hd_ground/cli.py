@@ -42,6 +42,9 @@ def register(subparsers) -> None:
     p.add_argument("--retrain", action="store_true", help="retrain the twin network with the new terms (needs --twin)")
     p.add_argument("--no-plots", action="store_true")
     p.set_defaults(func=_discover)
+    from hd_ground.fleet.cli import register as register_fleet  # ground fleet, fleet status|query|train-classifier
+
+    register_fleet(subparsers)
 
 
 def _discover(args: argparse.Namespace) -> int:

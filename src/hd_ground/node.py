@@ -28,12 +28,16 @@ from hdphm import rosutil as ru
 
 NODE_NAME = "ground"
 TOPIC_TRIGGER = "/hd/ground/trigger"
+#: std_srvs/Trigger service: start a ground analysis, answered at once (started / busy / no archive)
+SERVICE_ANALYSE = "/hd/ground/analyse"
 PARAMS: dict[str, Any] = {
     "archive_dir": "",  # "" -> idle until configured
     "healthy_missions": 3,
     "run_on_start": True,
     "recalibrate": True,
     "model_dir": "",  # twin the onboard node runs (ONNX dir); "" -> physics stand-in: residuals must match it
+    "store_dir": "",  # fleet store (hd_ground.fleet): "" -> none; else the archive's new missions are added to it
+    "fleet_scheduler": "local:1",  # Dask scheduler of that fleet analysis (local[:N] or tcp://HOST:PORT)
 }
 
 
@@ -81,46 +85,69 @@ def analyse_archive(archive_dir: str, healthy_missions: int = 3, do_recal: bool 
     return update, report
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
-    from rclpy.node import Node
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
+    from std_srvs.srv import Trigger
 
     from hd_onboard.node import declare
 
-    class GroundNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class GroundNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
+            self.n_runs = 0
+
+        def configure(self):
             self.pub_update = self.create_publisher(String, ru.TOPIC_TWIN_UPDATE, ru.qos("latched"))
             self.pub_report = self.create_publisher(String, ru.TOPIC_GROUND_REPORT, ru.qos("latched"))
             self.create_subscription(String, TOPIC_TRIGGER, lambda m: self.start(), ru.qos("stream"))
+            self.create_service(Trigger, SERVICE_ANALYSE, self._on_analyse)
             self.result: tuple[dict, dict] | None = None
             self.error: str | None = None
             self.busy = False
-            self.n_runs = 0
             self._lock = threading.Lock()
             self.create_timer(0.2, self._deliver)
+            ru.contain_callbacks(self, "hdphm/ground")  # no exception of a callback stops the node
+
+        def activate(self):
             if self.p["run_on_start"] and self.p["archive_dir"]:
                 self.start()
 
-        def start(self):
+        def start(self) -> tuple[bool, str]:
             if not self.p["archive_dir"]:
                 self.get_logger().warning("ground: no archive_dir parameter; nothing to analyse")
-                return
+                return False, "no archive_dir parameter: nothing to analyse"
             with self._lock:
                 if self.busy:
-                    return
+                    return False, "an analysis is already running"
                 self.busy = True
             threading.Thread(target=self._work, daemon=True).start()
+            return True, f"analysis of {self.p['archive_dir']} started (results on {ru.TOPIC_GROUND_REPORT})"
+
+        def _on_analyse(self, request, response):
+            response.success, response.message = self.start()
+            return response
 
         def _work(self):
             t0 = time.time()
             try:
                 upd, rep = analyse_archive(self.p["archive_dir"], int(self.p["healthy_missions"]), bool(self.p["recalibrate"]),
                                            log=lambda s: self.get_logger().warning(s), model_dir=self.p["model_dir"])
+                if self.p["store_dir"]:  # the same store `hdphm ground fleet` writes and `hdphm fleet` reads
+                    from hd_ground.fleet.run import fleet_status, run_fleet
+                    from hd_ground.fleet.tasks import FleetOptions
+
+                    s = run_fleet([self.p["archive_dir"]], self.p["store_dir"], self.p["fleet_scheduler"],
+                                  FleetOptions(healthy_missions=int(self.p["healthy_missions"]),
+                                               model_dir=self.p["model_dir"]), progress=False,
+                                  log=lambda s: self.get_logger().info(s))
+                    rep["fleet"] = {"summary": s, "status": fleet_status(self.p["store_dir"])}
                 rep["wall_s"] = time.time() - t0
                 self.result = (upd, rep)
             except Exception as e:  # noqa: BLE001 - report, never crash the stack
@@ -141,4 +168,4 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                                    f"for {len(upd.get('references', {}))}"
                                    + (" and recalibrated parameters" if "params" in upd else ""))
 
-    return GroundNode()
+    return bring_up(GroundNode(), autostart)

@@ -41,6 +41,8 @@ PARAMS: dict[str, Any] = {
     "actuator_id": "",  # hardware_id until /hd/mission says otherwise ("" -> header.frame_id or "unknown")
     "gear_ratio": 0.0,  # N; 0 -> from /hd/mission or the twin parameters
     "model_dir": "",  # trained twin (ONNX); "" -> physics-only stand-in
+    # directories a twin state's model_dir may lie in (os.pathsep-separated; + parent of model_dir, $HDPHM_MODEL_ROOTS)
+    "model_roots": "",
     "diag_period_s": 0.5,  # s of sample time between periodic /diagnostics
     "stale_timeout_s": 2.0,  # s
     "max_block": 2000,  # samples per core call
@@ -89,8 +91,9 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
-    """Build the onboard node (rclpy Node subclass instance)."""
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
+    """Build the onboard node (a managed node, configured and activated unless ``autostart`` is False)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
     from rclpy.parameter import Parameter
@@ -102,12 +105,18 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
     from hd_onboard.expected import make_expected
     from hd_twin import physics as ph
 
-    class OnboardNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class OnboardNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
+            self._rt = None
+            self._pool = None
+
+        def configure(self):
             self.cfg = OnboardConfig(**{k: self.p[k] for k in OnboardConfig.__dataclass_fields__ if k in self.p}).validate()
             self.twin_params = ph.TwinParams.from_yaml()
             self.twin_state: dict = {}
@@ -161,7 +170,9 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.create_timer(max(0.1, self.p["stale_timeout_s"] / 4), self._on_timer)
             self._new_core()
             self.get_logger().info(f"onboard up: twin={self.core.expected.kind} {self.core.expected.version}")
+            ru.contain_callbacks(self, "hdphm/onboard")  # no exception of a callback stops the node
             if self._rt is not None:
+                ru.contain_callbacks(self._rt_node, "hdphm/onboard")
                 self._rt.start()
 
         def _rt_spin(self):
@@ -179,6 +190,8 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                     return
 
         def _on_js_locked(self, first):
+            if not self.is_active:  # the joint-state thread's own node is not gated by the lifecycle
+                return
             with self._lock:
                 self._on_js(first)
 
@@ -207,8 +220,9 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
 
         def _on_mission_impl(self, msg):
             try:
-                meta = ru.parse_json_msg(msg, ru.TOPIC_MISSION)
-                float(meta.get("gear_ratio", "nan"))
+                from hd_twin.state import check_mission
+
+                meta = check_mission(ru.parse_json_msg(msg, ru.TOPIC_MISSION), ru.TOPIC_MISSION)
             except (ValueError, TypeError) as e:
                 self._error(f"{ru.TOPIC_MISSION}: {e}")
                 return
@@ -285,7 +299,15 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
 
         def _on_twin_impl(self, msg):
             try:
-                st = ru.parse_json_msg(msg, ru.TOPIC_TWIN_STATE)
+                from hd_twin import state as sv
+
+                st = sv.parse_json(msg.data, ru.TOPIC_TWIN_STATE, sv.MAX_STATE_BYTES)
+                if st.get("model_dir"):  # an ONNX file is loaded from it: only inside the model roots
+                    sv.check_model_dir(st["model_dir"], sv.model_roots(self.p.get("model_roots", ""), self.p["model_dir"]),
+                                       f"{ru.TOPIC_TWIN_STATE} model_dir")
+                for k in ("thresholds", "references"):
+                    if st.get(k) is not None:
+                        sv.check_per_actuator(st[k], f"{ru.TOPIC_TWIN_STATE} {k}")
                 params = ph.TwinParams.from_dict(st.get("params", {}), where=ru.TOPIC_TWIN_STATE) if st.get("params") else self.twin_params
                 ths = {}
                 for act, chans in (st.get("thresholds") or {}).items():
@@ -549,17 +571,18 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self._submit_windows(final=True)
             self._drain_windows(wait=True)
 
-        def destroy_node(self):
+        def release(self):
             if self._rt is not None:
                 self._rt_stop.set()
                 self._rt.join(timeout=2.0)
                 self._rt_exec.shutdown()
                 self._rt_node.destroy_node()
+                self._rt = None
             if self._pool is not None:
                 self._pool.shutdown(wait=True)
-            return super().destroy_node()
+                self._pool = None
 
-    return OnboardNode()
+    return bring_up(OnboardNode(), autostart)
 
 
 def _parse_references(refs: Any, where: str) -> dict[str, dict[str, Any]]:

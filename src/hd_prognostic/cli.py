@@ -10,8 +10,10 @@
     monotonicity / separability study of the health features.
 ``hdphm prognostic fit-obs FLEET_DIR --out JSON``
     fit the observation model + Archard prior on a (training) fleet.
-``hdphm prognostic battery|virkler --out DIR``
-    the same core on real degradation data.
+``hdphm prognostic fit FLEET_DIR|HI.csv --events EVENTS.csv --out MODEL.json``
+    the life model from HI histories + failure/removal/inspection events (``prognose --model`` uses it).
+``hdphm prognostic battery|virkler --data DIR --out DIR [--export DIR]``
+    the older particle filters on real degradation data, or the data as HI CSV + events (``--export``).
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ def _write_history(out: Path, hist, stem: str = "rul_history") -> None:
 
 
 def _prognose(args) -> int:
+    if args.model:
+        return _prognose_life(args)
     from hd_prognostic.hd import DEFAULT_OBS_MODEL, build_model, extract_actuator, prognose
     from hd_prognostic.observation import ObservationModel
     from hd_prognostic.plots import save_snapshot, save_state_history
@@ -175,7 +179,14 @@ def _battery(args) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    r = run_battery(n_particles=args.particles, seed=args.seed, t_start=args.t_start, regen_nu=args.regen_nu)
+    if args.export:
+        from hd_prognostic.realdata import battery_records
+
+        hi, ev = battery_records(args.data, args.export, eol_frac=args.eol_frac)
+        print(f"wrote {hi} and {ev}: run 'hdphm prognostic fit {hi} --events {ev} --out MODEL.json'")
+        return 0
+    r = run_battery(args.data, n_particles=args.particles, seed=args.seed, t_start=args.t_start,
+                    regen_nu=args.regen_nu)
     hists = [u["history"] for u in r["units"].values()]
     eols = [h.meta["t_eol"] for h in hists]
     save_alpha_lambda_grid(out / "battery_alpha_lambda.png", hists, eols, 0.2, unit="cycle",
@@ -209,7 +220,13 @@ def _virkler(args) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    r = run_virkler(n_particles=args.particles, seed=args.seed, max_specimens=args.max_specimens)
+    if args.export:
+        from hd_prognostic.realdata import virkler_records
+
+        hi, ev = virkler_records(args.data, args.export)
+        print(f"wrote {hi} and {ev}: run 'hdphm prognostic fit {hi} --events {ev} --out MODEL.json'")
+        return 0
+    r = run_virkler(args.data, n_particles=args.particles, seed=args.seed, max_specimens=args.max_specimens)
     hs = [u["history"] for u in r["units"].values()]
     sel = hs[:: max(1, len(hs) // 9)][:9]
     save_alpha_lambda_grid(out / "virkler_alpha_lambda.png", sel, [h.meta["t_eol"] for h in sel], 0.2,
@@ -221,6 +238,100 @@ def _virkler(args) -> int:
     print("Paris fits (2 folds):", json.dumps(r["fits"], default=float))
     print("aggregate over held-out specimens:", json.dumps(r["aggregate"], indent=1, default=float))
     print(f"wrote {out}/virkler_metrics.json, virkler_alpha_lambda.png")
+    return 0
+
+
+def _life_sources(src: str, events: str | None, feature: str, exposure: str, cache=None, workers: int = 1,
+                  progress: bool = False):
+    """SOURCE (fleet folder of actuator folders, or a ``unit,time,hi[,exposure]`` CSV) + events ->
+    ({exposure name: [UnitHistory]}, feature name, time unit, notes). Contract topics only."""
+    from hd_prognostic.lifemodel import EXPOSURES, attach_events, read_events, read_hi_csv
+
+    ev = read_events(events) if events else {}
+    p = Path(src)
+    notes = []
+    if p.is_file():
+        units = read_hi_csv(p)
+        notes += attach_events(units, ev, str(events))
+        name = "csv exposure" if exposure in ("auto", "csv") else exposure
+        return {name: units}, "hi", "step", notes
+    from hd_prognostic.hd import load_fleet_histories, unit_history
+
+    names = list(EXPOSURES) if exposure == "auto" else [exposure]
+    acts, _ = load_fleet_histories(p, feature, "missions", cache_dir=cache, workers=workers, progress=progress)
+    out = {}
+    for n in names:
+        try:
+            units = [unit_history(a, feature, n) for a in acts]
+        except ValueError as e:
+            if exposure != "auto":
+                raise
+            notes.append(f"exposure {n}: {e}")
+            continue
+        notes += attach_events(units, ev, str(events))
+        out[n] = units
+    return out, feature, "mission", notes
+
+
+def _fit_life(args) -> int:
+    from hd_prognostic.lifemodel import fit_best
+
+    cands, feature, tu, notes = _life_sources(args.source, args.events, args.feature, args.exposure,
+                                              cache=args.cache, workers=args.workers, progress=True)
+    for n in dict.fromkeys(notes):
+        print(f"note: {n}", file=sys.stderr)
+    m = fit_best(cands, feature=feature, time_unit=tu, progress=True)
+    m.to_json(args.out)
+    fi = m.fit_info
+    print(json.dumps({"exposure": m.exposure, "E_ref": m.E_ref, **m.to_json()["readable"],
+                      "inspections": m.inspections, "log_likelihood": fi["log_likelihood"],
+                      "units": fi["n_units"], "failures": fi["n_failures"], "censored": fi["n_censored"],
+                      "exposure_candidates": fi.get("exposure_candidates")}, indent=1, default=float))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _prognose_life(args) -> int:
+    from hd_prognostic.lifemodel import LifeModel, attach_events, predict_history, read_events, read_hi_csv
+    from hd_prognostic.plots import save_state_history
+
+    model = LifeModel.from_json(args.model)
+    out = Path(args.out)
+    src = Path(args.bag_dir)
+    ev = read_events(args.events) if args.events else {}
+    if src.is_file():
+        units = read_hi_csv(src)
+        if args.unit:
+            units = [u for u in units if u.unit == args.unit]
+            if not units:
+                raise ValueError(f"{src}: no unit {args.unit!r}")
+        elif len(units) != 1:
+            raise ValueError(f"{src}: {len(units)} units in the file; choose one with --unit")
+        u = units[0]
+    else:
+        from hd_prognostic.hd import extract_actuator, unit_history
+
+        if model.exposure not in ("missions", "hours", "load"):
+            raise ValueError(f"{args.model}: fitted on CSV exposure ({model.exposure}); give a CSV file")
+        a = extract_actuator(src, include_truth=False, progress=True)
+        u = unit_history(a, model.feature, model.exposure)
+    notes = attach_events([u], {k: v for k, v in ev.items() if k == u.unit}, str(args.events))
+    if u.events.failure is not None:  # prognosis of a failed unit: its record before the failure only
+        notes.append(f"{u.unit}: failure at {u.events.failure:g} in the events; RUL shown up to it")
+    u.events.failure = u.events.removal = None
+    hist = predict_history(model, u, n_samples=args.samples, seed=args.seed,
+                           method="ukf" if args.ukf else "grid")
+    hist.meta["notes"] = notes + u.notes
+    _write_history(out, hist)
+    for s in notes:
+        print(f"note: {s}", file=sys.stderr)
+    if not args.no_plots:
+        save_state_history(out / "state_history.png", hist, state_scale=1.0, state_unit="x median threshold",
+                           title=f"{u.unit}: latent degradation (1 = median failure threshold)")
+    rh = hist.meta.get("rul_hours")
+    extra = (f" = {rh['p50'][-1]:.0f} h [{rh['p5'][-1]:.0f}, {rh['p95'][-1]:.0f}]" if rh else "")
+    print(f"{u.unit}: {len(u.t)} records, last RUL P5/P50/P95 = {hist.p5[-1]:.1f}/{hist.p50[-1]:.1f}/"
+          f"{hist.p95[-1]:.1f} {model.time_unit}s{extra}; wrote {out}/rul_history.json and .csv")
     return 0
 
 
@@ -250,9 +361,16 @@ def _add_population_args(p) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("prognose", help="particle-filter RUL history of one actuator's bags")
-    p.add_argument("bag_dir", help="folder with one actuator's mission bags (*.mcap)")
+    p = sub.add_parser("prognose", help="RUL history of one actuator's bags (or one unit of a HI CSV)")
+    p.add_argument("bag_dir", help="folder with one actuator's mission bags (*.mcap), or a unit,time,hi CSV")
     p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--model", default=None,
+                   help="life model from 'hdphm prognostic fit' (failures/removals/inspections); without it the "
+                        "older wear-truth-calibrated particle filter runs (--obs-model)")
+    p.add_argument("--events", default=None, help="events CSV: this unit's inspections are used (life model)")
+    p.add_argument("--unit", default=None, help="unit of a multi-unit CSV")
+    p.add_argument("--samples", type=int, default=2000, help="RUL samples per prediction (life model)")
+    p.add_argument("--ukf", action="store_true", help="life model: UKF posterior instead of the exact grid")
     p.add_argument("--obs-model", default=None, help="observation-model JSON (default: the packaged one)")
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=0)
@@ -281,6 +399,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fuse", default=None, metavar="F1,F2,...",
                    help="fuse these features into one health index (wear regression on the training actuators)")
     p.set_defaults(func=_guard(_eval))
+    p = s.add_parser("fit", help="fit the life model from HI histories + failure/removal/inspection events")
+    p.add_argument("source", help="fleet folder (one folder of bags per actuator) or a unit,time,hi[,exposure] CSV")
+    p.add_argument("--events", required=True, help="CSV actuator_id,mission_index,event,quantity,value")
+    p.add_argument("--out", required=True, help="model JSON to write")
+    p.add_argument("--feature", default="HF_MTW_IF", help="health indicator (onboard per-mission feature)")
+    p.add_argument("--exposure", choices=("auto", "missions", "hours", "load"), default="auto",
+                   help="degradation clock; auto: the maximum-likelihood one (bags only)")
+    p.add_argument("--cache", default=None, help="per-actuator feature cache folder")
+    p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
+    p.set_defaults(func=_guard(_fit_life))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")
     p.add_argument("--out", default="runs/prognostic_features")
@@ -294,7 +422,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--fuse", default=None, metavar="F1,F2,...",
                    help="fuse these features into one health index (wear regression on the training actuators)")
     p.set_defaults(func=_guard(_fit_obs))
-    p = s.add_parser("battery", help="NASA B0005-7 exponential-fade PF, leave-one-cell-out")
+    p = s.add_parser("battery", help="NASA B0005-7: exponential-fade PF (leave-one-cell-out), or --export the "
+                                      "cells as HI CSV + events for 'prognostic fit'")
+    p.add_argument("--data", required=True, help="folder with B0005.csv ... (columns cycle,capacity_ah), e.g. "
+                                                 "data/measured/nasa_battery of the shared data")
+    p.add_argument("--export", default=None, metavar="DIR", help="write battery_hi.csv + battery_events.csv")
+    p.add_argument("--eol-frac", type=float, default=0.8, help="failure capacity / rated 2 Ah (--export)")
     p.add_argument("--out", default="runs/prognostic_battery")
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=0)
@@ -302,7 +435,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--regen-nu", type=float, default=0.0,
                    help="dof of the upper (capacity-regeneration) likelihood tail; 0 = symmetric Student-t")
     p.set_defaults(func=_guard(_battery))
-    p = s.add_parser("virkler", help="Virkler crack growth, Paris-law PF, 2-fold over specimens")
+    p = s.add_parser("virkler", help="Virkler crack growth: Paris-law PF (2-fold over specimens), or --export "
+                                      "the specimens as HI CSV + events for 'prognostic fit'")
+    p.add_argument("--data", required=True, help="folder with VirklerData-Raw.csv and VirklerData.csv")
+    p.add_argument("--export", default=None, metavar="DIR", help="write virkler_hi.csv + virkler_events.csv")
     p.add_argument("--out", default="runs/prognostic_virkler")
     p.add_argument("--particles", type=int, default=2000)
     p.add_argument("--seed", type=int, default=0)

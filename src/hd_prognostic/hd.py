@@ -407,3 +407,69 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
         "likelihood": likelihood,
     })
     return hist
+
+
+# --------------------------------------------------------------- life model from operator records ---
+def unit_history(a: ActuatorData, feature: str = "HF_MTW_IF", exposure: str = "load"):
+    """One actuator's health-indicator history for :mod:`hd_prognostic.lifemodel` (contract data only).
+
+    ``exposure``: ``missions`` (E at the start of mission k = k), ``hours`` (operating hours at the mission
+    start, from the bags' metadata) or ``load`` (the Archard load-sliding work ``W_load`` [J] summed over
+    the missions before k; a missing mission's W is the median of the unit's own). ``E_next`` is the
+    exposure at the start of the mission after the last one (that mission's own W / hours are known).
+    """
+    from hd_prognostic.lifemodel import EXPOSURES, UnitHistory
+
+    if exposure not in EXPOSURES:
+        raise ValueError(f"exposure {exposure!r} is not one of {', '.join(EXPOSURES)}")
+    mi = a.mission_index.astype(float)
+    y = a.feature(feature)
+    if not np.isfinite(y).any():
+        raise ValueError(f"{a.actuator_id}: health indicator {feature!r} is never computable in its bags")
+    hpm = _hours_per_mission(a.operating_hours, a.mission_index)
+    full = np.arange(int(mi[0]), int(mi[-1]) + 1)
+    pos = (mi - mi[0]).astype(int)
+    if exposure == "missions":
+        E = mi.copy()
+        E_next = float(mi[-1] + 1)
+    elif exposure == "hours":
+        h = a.operating_hours.astype(float)
+        if hpm is None or not np.all(np.isfinite(h)):
+            raise ValueError(f"{a.actuator_id}: operating_hours do not advance: exposure 'hours' unusable")
+        E, E_next = h, float(h[-1] + hpm)
+    else:
+        W = np.full(len(full), np.nan)
+        W[pos] = a.feature("W_load")
+        good = W[np.isfinite(W) & (W >= 0)]
+        if not len(good):
+            raise ValueError(f"{a.actuator_id}: no load-sliding integral W_load in any mission: exposure 'load' "
+                             "unusable (use --exposure missions or hours)")
+        W = np.where(np.isfinite(W) & (W >= 0), W, float(np.median(good)))
+        before = float(mi[0]) * float(np.median(good))  # missions flown before the first recorded one
+        Ec = before + np.concatenate([[0.0], np.cumsum(W)])
+        E, E_next = Ec[pos], float(Ec[-1])
+    return UnitHistory(a.actuator_id, mi, y, np.asarray(E, float), discrete=True, E_next=E_next,
+                       hours_per_step=hpm, notes=list(a.errors))
+
+
+def load_fleet_histories(fleet_dir, feature: str = "HF_MTW_IF", exposure: str = "load", cache_dir=None,
+                         workers: int = 1, progress: bool = False):
+    """Every actuator folder of a fleet -> (ActuatorData list, UnitHistory list); contract topics only."""
+    dirs = find_actuator_dirs(fleet_dir)
+    jobs = [(d, Path(cache_dir) / f"{d.name}.contract.features.json" if cache_dir else None) for d in dirs]
+    if workers > 1 and len(jobs) > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(workers, len(jobs))) as ex:
+            acts = list(ex.map(_extract_contract, jobs))
+    else:
+        acts = [_extract_contract(j) for j in jobs]
+    if progress:
+        for a in acts:
+            print(f"  {a.actuator_id}: {len(a.paths)} missions", flush=True)
+    return acts, [unit_history(a, feature, exposure) for a in acts]
+
+
+def _extract_contract(job):
+    d, cache = job
+    return extract_actuator(d, include_truth=False, cache=cache)

@@ -45,6 +45,9 @@ HEALTH_COLUMNS = ("stamp", "mission_index", "final", "h_mean", "h_p5", "h_p95", 
                   "risk", "observation", "n_windows")
 PARAMS: dict[str, Any] = {
     "obs_model": "",  # ObservationModel JSON; "" -> hd_prognostic/default_obs_model.json when present
+    # life model from 'hdphm prognostic fit' (fleet failures/removals/inspections); when set it replaces
+    # the observation-model particle filter: h_* columns are then the latent degradation (1 = median threshold)
+    "life_model": "",
     "n_particles": 1000,
     "rul_particles": 500,
     "max_missions": 2000,
@@ -123,6 +126,81 @@ class ActuatorTracker:
         return out
 
 
+class LifeTracker:
+    """Per-actuator prognosis with the fleet life model (:mod:`hd_prognostic.lifemodel`), one record per
+    mission, the same per-mission observation as batch (``mission_observation`` of the window rows)."""
+
+    def __init__(self, actuator: str, model, p: dict[str, Any]):
+        self.actuator, self.model, self.p = actuator, model, p
+        self.t: list[float] = []
+        self.y: list[float] = []
+        self.E: list[float] = []
+        self.W_sum = 0.0
+        self.mission_index = math.nan
+        self.hours = math.nan
+        self.windows: list[dict] = []
+        self.rng = np.random.default_rng(int(p["seed"]))
+
+    def add_windows(self, rows: list[dict]) -> None:
+        self.windows.extend(rows)
+
+    def _exposure(self, k: float) -> tuple[float, float]:
+        """(exposure at the start of this mission, at the start of the next) for the model's clock."""
+        from hd_onboard.features import mission_observation
+
+        W = mission_observation(self.windows)["W_load"] if self.windows else math.nan
+        ex = self.model.exposure
+        if ex == "missions":
+            return k, k + 1.0
+        if ex == "hours":
+            hpm = float(self.model.fit_info.get("hours_per_step") or 0.0)
+            return self.hours, self.hours + hpm
+        if not math.isfinite(W):
+            W = self.W_sum / max(len(self.t), 1) if self.t else 0.0
+        return self.W_sum, self.W_sum + W
+
+    def estimate(self, final: bool) -> dict[str, float]:
+        from hd_onboard.features import mission_observation
+        from hd_prognostic.lifemodel import UnitHistory, predict_at
+
+        o = mission_observation(self.windows)
+        y = float(o.get(self.model.feature, math.nan))
+        k = self.mission_index if math.isfinite(self.mission_index) else float(len(self.t))
+        E0, E1 = self._exposure(k)
+        out = {"mission_index": k, "final": float(final), "observation": y, "n_windows": float(len(self.windows))}
+        t = self.t + [k]
+        if len(t) > 1 and t[-1] <= t[-2]:  # repeated / unknown mission index: count missions instead
+            t[-1] = t[-2] + 1.0
+        u = UnitHistory(self.actuator, np.array(t), np.array(self.y + [y]), np.array(self.E + [E0]),
+                        discrete=True, E_next=E1)
+        if not math.isfinite(E0):
+            out.update(h_mean=math.nan, h_p5=math.nan, h_p95=math.nan, rul_p5=math.nan, rul_p50=math.nan,
+                       rul_p95=math.nan, risk=math.nan)
+        else:
+            r = predict_at(self.model, u, self.rng, int(self.p["rul_particles"]))
+            q = np.quantile(r["rul"], [0.05, 0.5, 0.95])
+            out.update(h_mean=r["latent"][1], h_p5=r["latent"][0], h_p95=r["latent"][2], rul_p5=float(q[0]),
+                       rul_p50=float(q[1]), rul_p95=float(q[2]),
+                       risk=float(np.mean(r["rul"] <= float(self.p["risk_horizon"]))))
+        if final:
+            self.t.append(float(t[-1]))
+            self.y.append(y)
+            self.E.append(E0)
+            if self.model.exposure == "load":
+                self.W_sum = E1
+            self.windows = []
+        return out
+
+
+def load_life_model(path: str):
+    from hd_prognostic.lifemodel import LifeModel
+
+    try:
+        return LifeModel.from_json(path), ""
+    except (OSError, ValueError, KeyError) as e:
+        return None, f"{path}: life model unusable ({e})"
+
+
 def load_obs_model(path: str):
     from hd_prognostic.observation import ObservationModel
 
@@ -137,21 +215,30 @@ def load_obs_model(path: str):
         return None, f"{path}: observation model unusable ({e})"
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.node import Node
     from rclpy.parameter import Parameter
     from std_msgs.msg import Float64MultiArray, String
 
     from hd_onboard.node import declare, diag_status
 
-    class PrognosticNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class PrognosticNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
-            self.obs, self.obs_problem = load_obs_model(self.p["obs_model"])
+
+        def configure(self):
+            self.life = None
+            if self.p["life_model"]:
+                self.life, self.obs_problem = load_life_model(self.p["life_model"])
+                self.obs = None
+            else:
+                self.obs, self.obs_problem = load_obs_model(self.p["obs_model"])
             if self.obs_problem:
                 self.get_logger().warning(self.obs_problem)
             self.trackers: dict[str, ActuatorTracker] = {}
@@ -166,15 +253,19 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission, ru.mission_sub_qos())
             self.create_timer(float(self.p["publish_period_s"]), self._on_timer)
             self._dirty = False
+            ru.contain_callbacks(self, "hdphm/prognostic")  # no exception of a callback stops the node
 
         def _tracker(self, act: str) -> ActuatorTracker:
             if act not in self.trackers:
-                self.trackers[act] = ActuatorTracker(act, self.obs, self.p)
+                self.trackers[act] = (LifeTracker(act, self.life, self.p) if self.life is not None
+                                      else ActuatorTracker(act, self.obs, self.p))
             return self.trackers[act]
 
         def _on_mission(self, msg):
             try:
-                meta = ru.parse_json_msg(msg, ru.TOPIC_MISSION)
+                from hd_twin.state import check_mission
+
+                meta = check_mission(ru.parse_json_msg(msg, ru.TOPIC_MISSION), ru.TOPIC_MISSION)
             except ValueError as e:
                 self.get_logger().error(str(e))
                 return
@@ -182,14 +273,19 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 mi = float(meta.get("mission_index", "nan"))
             except (TypeError, ValueError):
                 mi = math.nan
-            self.pending.append((str(meta.get("actuator_id", "unknown")), mi))
+            try:
+                hrs = float(meta.get("operating_hours", "nan"))
+            except (TypeError, ValueError):
+                hrs = math.nan
+            self.pending.append((str(meta.get("actuator_id", "unknown")), mi, hrs))
             if self.current is None:
                 self._next_mission()
 
         def _next_mission(self):
-            act, mi = self.pending.popleft()
+            act, mi, hrs = self.pending.popleft()
             self.current = act
             self._tracker(act).mission_index = mi
+            self._tracker(act).hours = hrs
 
         def _finalise(self):
             if self.current is not None:
@@ -210,7 +306,7 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 mi = w.get("mission_index", math.nan)
                 if self.current is not None and self.pending and math.isfinite(mi):
                     cur = self.trackers[self.current].mission_index
-                    if mi != cur and any(m == mi for _, m in self.pending):  # the onboard moved on
+                    if mi != cur and any(m == mi for _, m, _h in self.pending):  # the onboard moved on
                         self._finalise()
                 if self.current is None:
                     if self.pending:
@@ -235,11 +331,11 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
                 self.history.setdefault(act, []).append(est)
             self.pub.publish(ru.pack_table(HEALTH_COLUMNS, np.array([[float(est.get(c, math.nan)) for c in HEALTH_COLUMNS]])))
             self.n_published += 1
-            lev = 1 if self.obs is None else (2 if est.get("risk", 0) > 0.5 else 1 if est.get("risk", 0) > 0.1 else 0)
+            lev = 1 if (self.obs is None and self.life is None) else (2 if est.get("risk", 0) > 0.5 else 1 if est.get("risk", 0) > 0.1 else 0)
             msg = self.obs_problem or f"RUL P50 {est['rul_p50']:.1f} missions (P5 {est['rul_p5']:.1f}, P95 {est['rul_p95']:.1f})"
             a = DiagnosticArray()
             a.header.stamp = self.get_clock().now().to_msg()
             a.status = [diag_status("hdphm/prognostic", lev, msg, act, est)]
             self.pub_diag.publish(a)
 
-    return PrognosticNode()
+    return bring_up(PrognosticNode(), autostart)

@@ -31,18 +31,14 @@ from hd_prognostic import metrics as M
 from hd_prognostic.models import ExponentialFade, ParisCrack
 from hd_prognostic.tracking import RULHistory, track
 
-DATA_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "measured"
-if not DATA_DIR.exists():  # repository checked out elsewhere: the shared folder next to it
-    DATA_DIR = Path("/work/shared/data/measured")
-
 RATED_AH = 2.0
 VIRKLER_LENGTHS_MM = np.array([9, 11, 13, 17, 20, 26, 33, 39, 49.8])
 
 
 # ---------------------------------------------------------------- battery ---
-def load_battery(cell: str, data_dir: Path | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(cycle, capacity Ah) of a NASA cell (``B0005`` ...); raises on a missing/corrupt file."""
-    p = Path(data_dir or DATA_DIR / "nasa_battery") / f"{cell}.csv"
+def load_battery(cell: str, data_dir: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """(cycle, capacity Ah) of a NASA cell (``data_dir/B0005.csv`` ...); raises on a missing/corrupt file."""
+    p = Path(data_dir) / f"{cell}.csv"
     if not p.exists():
         raise FileNotFoundError(f"{p}: no such battery file")
     try:
@@ -93,8 +89,8 @@ def fit_fade_prior(curves: list[tuple[np.ndarray, np.ndarray]]) -> dict:
     }
 
 
-def run_battery(cells=("B0005", "B0006", "B0007"), eol_fracs=(0.7, 0.8), n_particles: int = 2000,
-                t_start: float = 20.0, seed: int = 0, data_dir: Path | None = None,
+def run_battery(data_dir: str | Path, cells=("B0005", "B0006", "B0007"), eol_fracs=(0.7, 0.8), n_particles: int = 2000,
+                t_start: float = 20.0, seed: int = 0,
                 likelihood: str = "student_t", progress: bool = False, regen_nu: float = 0.0) -> dict:
     """Leave-one-cell-out PF prognosis of every cell for each EOL definition.
 
@@ -140,9 +136,10 @@ class Specimen:
     N_fail: float  # cycles at a = 49.8 mm
 
 
-def load_virkler(data_dir: Path | None = None, check_units: bool = True) -> list[Specimen]:
-    """All 68 specimens: processed grid points (V2 kcycles) merged with the raw lengths (mapped to cycles)."""
-    d = Path(data_dir or DATA_DIR / "virkler")
+def load_virkler(data_dir: str | Path, check_units: bool = True) -> list[Specimen]:
+    """All 68 specimens of ``data_dir`` (VirklerData-Raw.csv + VirklerData.csv): processed grid points
+    (V2 kcycles) merged with the raw lengths (mapped to cycles)."""
+    d = Path(data_dir)
     praw, pproc = d / "VirklerData-Raw.csv", d / "VirklerData.csv"
     for p in (praw, pproc):
         if not p.exists():
@@ -231,7 +228,7 @@ def fit_paris(train: list[Specimen]) -> dict:
     }
 
 
-def run_virkler(n_particles: int = 2000, seed: int = 0, rul_step: float = 1000.0, data_dir: Path | None = None,
+def run_virkler(data_dir: str | Path, n_particles: int = 2000, seed: int = 0, rul_step: float = 1000.0,
                 max_specimens: int | None = None, progress: bool = False) -> dict:
     """2-fold (odd/even specimen) Paris-law PF prognosis; metrics per held-out specimen."""
     specs = load_virkler(data_dir)
@@ -261,3 +258,42 @@ def run_virkler(n_particles: int = 2000, seed: int = 0, rul_step: float = 1000.0
             per.append(m)
     out["aggregate"] = M.aggregate(per)
     return out
+
+
+# ------------------------------------------------- the same data as HI CSV + events for the life model ---
+def battery_records(data_dir: str | Path, out_dir: str | Path, cells=("B0005", "B0006", "B0007"),
+                    eol_frac: float = 0.8) -> tuple[Path, Path]:
+    """Write ``battery_hi.csv`` (unit,time,hi = cycle, capacity Ah) and ``battery_events.csv`` (failure =
+    first cycle with capacity <= eol_frac x rated, found at that cycle; cells that never reach it have no
+    row: censored at their last cycle) for ``hdphm prognostic fit`` / ``prognose``."""
+    from hd_prognostic.lifemodel import UnitEvents, UnitHistory, write_events, write_hi_csv
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    units, ev = [], {}
+    for c in cells:
+        cyc, cap = load_battery(c, data_dir)
+        units.append(UnitHistory(c, cyc, cap, cyc.copy()))
+        t = battery_eol(cyc, cap, eol_frac * RATED_AH)
+        if np.isfinite(t):
+            ev[c] = UnitEvents(failure=float(t))
+    write_hi_csv(out / "battery_hi.csv", units)
+    write_events(out / "battery_events.csv", ev)
+    return out / "battery_hi.csv", out / "battery_events.csv"
+
+
+def virkler_records(data_dir: str | Path, out_dir: str | Path) -> tuple[Path, Path]:
+    """Write ``virkler_hi.csv`` (unit,time,hi = specimen, cycles, crack length m; records before failure)
+    and ``virkler_events.csv`` (failure at the cycle count of the last recorded length, 49.8 mm)."""
+    from hd_prognostic.lifemodel import UnitEvents, UnitHistory, write_events, write_hi_csv
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    units, ev = [], {}
+    for s in load_virkler(data_dir):
+        sel = s.N < s.N_fail
+        units.append(UnitHistory(f"specimen{s.sid}", s.N[sel], s.a[sel], s.N[sel].copy()))
+        ev[f"specimen{s.sid}"] = UnitEvents(failure=float(s.N_fail))
+    write_hi_csv(out / "virkler_hi.csv", units)
+    write_events(out / "virkler_events.csv", ev)
+    return out / "virkler_hi.csv", out / "virkler_events.csv"

@@ -2,11 +2,13 @@
 
 Never imported by twin, onboard, prognostic or ground code. Public API:
 ``simulate_mission``, ``simulate_fleet``, ``simulate_life``, ``sample_population``,
-``nominal``, ``EffectSet``, ``REGISTRY``, ``make_profile``, ``write_sim_mission``.
+``nominal``, ``EffectSet``, ``REGISTRY``, ``LAW_SLOTS``, ``FAMILIES``, ``family_unit``, ``make_profile``,
+``write_sim_mission``.
 See src/hd_sim/README.md.
 """
 
-from .effects import REGISTRY, EffectSet, effects_table
+from .effects import LAW_SLOTS, REGISTRY, EffectSet, effects_table
+from .families import FAMILIES, family_unit
 from .params import nominal, sample_population
 
 
@@ -47,5 +49,5 @@ def write_sim_mission(path, params=None, effects=None, profile="inspection", see
     return str(path), m, truth
 
 
-__all__ = ["REGISTRY", "EffectSet", "effects_table", "nominal", "sample_population", "simulate_mission",
+__all__ = ["LAW_SLOTS", "FAMILIES", "family_unit", "REGISTRY", "EffectSet", "effects_table", "nominal", "sample_population", "simulate_mission",
            "simulate_fleet", "simulate_life", "make_profile", "write_sim_mission"]

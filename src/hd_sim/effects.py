@@ -204,7 +204,7 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
 #: off first (``EffectSet.with_law``, CLI ``--law SLOT=CHOICE``); ``derived`` refuses two on at once.
 #: The hysteresis (Bouc-Wen) effect is independent of the torsion slot (the default plant has the
 #: three-slope curve *and* the hysteresis); the ``bouc_wen`` choice is the linear spring with it,
-#: ``linear`` the linear spring without it.
+#: ``linear`` / ``deadzone`` the linear spring (with a dead zone) without it.
 LAW_SLOTS: dict[str, dict[str, tuple[str, ...]]] = {
     "friction_transition": {"hard_sign": (), "tanh": ("smooth_friction",), "lugre": ("lugre_friction",)},
     "torsion": {"three_slope": ("nonlinear_stiffness",), "linear": (), "cubic": ("cubic_stiffness",),
@@ -295,7 +295,7 @@ class EffectSet:
         if choice not in LAW_SLOTS[slot]:
             raise KeyError(f"law slot {slot!r} has no choice {choice!r}; choices: {sorted(LAW_SLOTS[slot])}")
         new = self.with_off(*slot_members(slot))
-        if (slot, choice) == ("torsion", "linear"):  # a plain spring: no hysteresis either
+        if slot == "torsion" and choice in ("linear", "deadzone"):  # a plain spring (with a dead zone): no hysteresis
             new = new.with_off("hysteresis")
         return new.with_on(*LAW_SLOTS[slot][choice])
 

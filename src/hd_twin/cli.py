@@ -113,7 +113,8 @@ def _tune(args) -> int:
     from .tune import run_study
 
     best = run_study(args.bags, n_trials=args.trials, storage=args.storage, study_name=args.study, out_dir=args.out,
-                     epochs=args.epochs, seed=args.seed, threads=args.threads, base_preset=args.preset)
+                     epochs=args.epochs, seed=args.seed, threads=args.threads, base_preset=args.preset,
+                     worker=args.worker)
     print(json.dumps(best, indent=2))
     return 0
 
@@ -169,6 +170,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trials", type=int, default=20)
     p.add_argument("--storage", help="Optuna storage URL (default sqlite:///OUT/study.db; resumable)")
     p.add_argument("--study", default="hd_twin", help="study name")
+    p.add_argument("--worker", type=int, default=0,
+                   help="this process's number when several share one --storage study (own sampler seed)")
     p.add_argument("--out", required=True)
     p.add_argument("--preset", default="small", choices=("small", "paper", "tiny"), help="base preset for the fixed settings")
     p.add_argument("--epochs", type=int, help="epochs per trial (default: the preset's)")

@@ -177,13 +177,18 @@ class BlockGram:
         if weights is not None:
             sw = np.sqrt(np.asarray(weights, float))
             X, y = X * sw[:, None], y * sw
+        block = np.asarray(block)
+        if len(block) > 1 and np.any(np.diff(block) < 0):
+            o = np.argsort(block, kind="stable")
+            X, y, block = X[o], y[o], block[o]
         self.scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
         Xs = X / self.scale
-        self.blocks = np.unique(block)
-        self.n = np.array([np.sum(block == b) for b in self.blocks])
-        self.G = np.stack([Xs[block == b].T @ Xs[block == b] for b in self.blocks])
-        self.g = np.stack([Xs[block == b].T @ y[block == b] for b in self.blocks])
-        self.yy = np.array([y[block == b] @ y[block == b] for b in self.blocks])
+        self.blocks, start = np.unique(block, return_index=True)
+        sl = [slice(a, b) for a, b in zip(start, list(start[1:]) + [len(block)])]
+        self.n = np.array([s.stop - s.start for s in sl])
+        self.G = np.stack([Xs[s].T @ Xs[s] for s in sl])
+        self.g = np.stack([Xs[s].T @ y[s] for s in sl])
+        self.yy = np.array([y[s] @ y[s] for s in sl])
 
     def _solve(self, G, g):
         p = G.shape[-1]
@@ -265,7 +270,8 @@ class SeparableFit:
 
 def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: list[str], block: np.ndarray,
                   shapes: Sequence[Shape] = (), *, weights: np.ndarray | None = None,
-                  flat_tol: float = 1e-3, jackknife: bool = True) -> SeparableFit:
+                  flat_tol: float = 1e-3, jackknife: bool = True, positive: Sequence[int] = (),
+                  max_jk: int = 10) -> SeparableFit:
     """Variable projection: ``y ~ design(shape) @ coef`` with the shape chosen by CV profile search.
 
     ``design(shape_dict)`` returns the (n, len(names)) column matrix for the given shape values.
@@ -273,7 +279,9 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
     A shape is flagged unidentified (``identified[name] = False``, a note says why) when the CV RMSE
     over its searched range varies by less than ``flat_tol`` (relative), when the optimum sits on a
     bound (within 2 % of the searched range: the data only bound it; the bound is kept), or when its
-    jackknife SD exceeds its own size (log shapes: SD of the log value > 1).
+    jackknife SD exceeds its own size (log shapes: SD of the log value > 1). Columns listed in
+    ``positive`` must get a positive coefficient (physics): shapes where they do not are not chosen.
+    The jackknife leaves out one of at most ``max_jk`` groups of neighbouring blocks at a time.
     """
     y = np.asarray(y, float)
     block = np.asarray(block)
@@ -290,11 +298,15 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
             cache[vals] = BlockGram(X, y, block, weights)
         return cache[vals]
 
+    penalty = 10.0 * float(np.sum(np.asarray(y, float) ** 2)) + 1.0
+
     def cv_obj(vals: tuple, use: np.ndarray | None = None) -> float:
+        gm = gram(vals)
+        if positive and np.any(gm.coef(use)[list(positive)] <= 0):
+            return penalty
         if nb >= 3:
-            e = gram(vals).cv_sse(use)
-            return float(np.nansum(e))
-        return gram(vals).sse(use)
+            return float(np.nansum(gm.cv_sse(use)))
+        return gm.sse(use)
 
     def optimise(use: np.ndarray | None, start: tuple | None) -> tuple[tuple, float, dict]:
         if not shapes:
@@ -328,7 +340,7 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
             fu = float(r.fun)
         else:
             r = minimize(f, [s.to_u(b) for s, b in zip(shapes, best)], method="Nelder-Mead",
-                         bounds=list(zip(lo, hi)), options={"xatol": 1e-3, "fatol": 1e-9, "maxfev": 60 * len(shapes)})
+                         bounds=list(zip(lo, hi)), options={"xatol": 1e-3, "fatol": 1e-9, "maxfev": (60 if start is None else 25) * len(shapes)})
             u, fu = np.clip(r.x, lo, hi), float(r.fun)
         f0 = cv_obj(best, use)
         if fu < f0:
@@ -356,8 +368,12 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
     for i, s in enumerate(shapes):
         pr = np.asarray(prof[s.name], float)
         identified[s.name] = True
-        rng = (np.max(pr) - np.min(pr)) / max(np.min(pr), 1e-300)
-        if rng < flat_tol:
+        pr = pr[pr < penalty]
+        rng = (np.max(pr) - np.min(pr)) / max(np.min(pr), 1e-300) if len(pr) else 0.0
+        if fbest >= penalty:
+            identified[s.name] = False
+            notes.append(f"{s.name}: no value in {s.lo:.3g}..{s.hi:.3g} gives the required positive coefficient")
+        elif rng < flat_tol:
             identified[s.name] = False
             notes.append(f"{s.name}: the held-out error does not depend on it over {s.lo:.3g}..{s.hi:.3g} "
                          f"(CV profile varies by {rng:.1e}); not identified")
@@ -372,18 +388,20 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
         shape_sd[s.name] = float("nan")
     if shapes and jackknife and nb >= 3:
         blocks = np.unique(block)
+        # jackknife groups: at most ``max_jk`` groups of neighbouring blocks (each left out in turn)
+        grp = np.minimum((np.arange(len(blocks)) * min(max_jk, len(blocks))) // len(blocks), max_jk - 1)
+        ng = int(grp.max()) + 1
         jk, jb = [], []
-        for b in range(len(blocks)):
-            use = np.ones(len(blocks), bool)
-            use[b] = False
+        for b in range(ng):
+            use = grp != b
             v, _, _ = optimise(use, best)
             jk.append([s.to_u(x) for s, x in zip(shapes, v)])
             jb.append(gram(v).coef(use))
         jk, jb = np.asarray(jk), np.asarray(jb)
         # joint jackknife: the coefficients' covariance includes the uncertainty of the shape they depend on
         d = jb - jb.mean(0)
-        cov = (len(blocks) - 1) / len(blocks) * (d.T @ d)
-        sd_u = np.sqrt((len(blocks) - 1) / len(blocks) * np.sum((jk - jk.mean(0)) ** 2, 0))
+        cov = (ng - 1) / ng * (d.T @ d)
+        sd_u = np.sqrt((ng - 1) / ng * np.sum((jk - jk.mean(0)) ** 2, 0))
         for i, s in enumerate(shapes):
             shape_sd[s.name] = float(sd_u[i] * best[i]) if s.log else float(sd_u[i])
             too_wide = sd_u[i] > 1.0 if s.log else sd_u[i] > abs(best[i])

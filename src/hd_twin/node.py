@@ -13,13 +13,20 @@ transient_local, depth 1, so a node that starts late still gets it)::
 Updates arrive on ``/hd/twin/update`` (same JSON shape, any subset of the
 keys; ``thresholds`` and ``references`` are merged per actuator; a state or
 update without ``references`` is valid: older payloads load). Every update is
-validated (``TwinParams.from_dict`` bounds, threshold and reference sanity:
-``hd_onboard.detector`` ``from_dict``); a bad one is refused
-with a /diagnostics WARN naming the problem and the state is unchanged.
+validated field by field first (:mod:`hd_twin.state`: types, finite numbers,
+physical ranges, sizes, JSON depth, ``model_dir`` inside the configured
+``model_roots``), then semantically (``TwinParams.from_dict`` bounds, threshold
+and reference sanity: ``hd_onboard.detector`` ``from_dict``); a bad one is
+refused with a /diagnostics WARN naming the field, the state is unchanged, and
+a short summary goes to a bounded memory of refusals (:attr:`refusals`, the
+last :data:`MAX_REFUSALS`). No exception of a callback stops the node
+(``rosutil.contain_callbacks``).
 """
 
 from __future__ import annotations
 
+import collections
+import hashlib
 import json
 import time
 from typing import Any
@@ -30,7 +37,13 @@ NODE_NAME = "twin"
 PARAMS: dict[str, Any] = {
     "model_dir": "",  # trained twin directory (config.json + twin.onnx); "" -> physics-only stand-in
     "params_file": "",  # YAML of TwinParams; "" -> hd_twin/default_params.yaml (or the model's config)
+    # directories an update's model_dir may lie in (os.pathsep-separated); the parent of model_dir and
+    # $HDPHM_MODEL_ROOTS are always included
+    "model_roots": "",
 }
+#: refused updates remembered (short summaries), and update digests remembered against re-delivery
+MAX_REFUSALS = 32
+MAX_SEEN = 256
 
 
 def initial_state(model_dir: str = "", params_file: str = "") -> dict:
@@ -60,15 +73,21 @@ def initial_state(model_dir: str = "", params_file: str = "") -> dict:
     return state
 
 
-def apply_update(state: dict, upd: dict, source: str = "update") -> dict:
-    """New state = ``state`` with ``upd`` merged, validated; raises ValueError naming the bad field."""
+def apply_update(state: dict, upd: dict, source: str = "update", model_roots: list[str] | None = None) -> dict:
+    """New state = ``state`` with ``upd`` merged, validated; raises ValueError naming the bad field.
+
+    ``model_roots``: directories a new ``model_dir`` may lie in (None: those of
+    :func:`hd_twin.state.model_roots` for the state's current ``model_dir``)."""
     from hd_onboard.detector import ChannelThreshold
     from hd_twin import physics as ph
+    from hd_twin import state as sv
 
-    known = {"params", "thresholds", "references", "normalisation", "effects", "degradation_law", "model_dir", "model_version", "updated_by"}
-    unknown = set(upd) - known
-    if unknown:
-        raise ValueError(f"{source}: unknown key(s) {sorted(unknown)}; known: {sorted(known)}")
+    if model_roots is None:
+        model_roots = sv.model_roots("", state.get("model_dir", ""))
+    try:
+        upd = sv.check_update(upd, model_roots, source)
+    except sv.UpdateError as e:
+        raise sv.refusal(source, e) from None
     new = json.loads(json.dumps(state))
     if "params" in upd:
         if not isinstance(upd["params"], dict):
@@ -76,6 +95,10 @@ def apply_update(state: dict, upd: dict, source: str = "update") -> dict:
         merged = {k: v for k, v in new["params"].items() if k not in ("mu_g", "K_out")}
         merged.update({k: v for k, v in upd["params"].items() if k not in ("mu_g", "K_out")})
         new["params"] = ph.TwinParams.from_dict(merged, where=f"{source} params").to_dict()
+        try:
+            sv.check_merged_params(new["params"])
+        except sv.UpdateError as e:
+            raise sv.refusal(source, e) from None
     if "thresholds" in upd:
         if not isinstance(upd["thresholds"], dict):
             raise ValueError(f"{source}: thresholds must be a mapping actuator -> channel -> values")
@@ -99,7 +122,11 @@ def apply_update(state: dict, upd: dict, source: str = "update") -> dict:
         if k in upd:
             new[k] = str(upd[k])
     new["revision"] = int(state.get("revision", 0)) + 1
-    new["updated_by"] = str(upd.get("updated_by", source))
+    new["updated_by"] = str(upd.get("updated_by", source))[:sv.MAX_TEXT]
+    size = len(json.dumps(new))
+    if size > sv.MAX_STATE_BYTES // 2:  # merged thresholds/references grow per actuator: bound the whole state
+        raise ValueError(f"{source}: the state would grow to {size} bytes, above the cap of {sv.MAX_STATE_BYTES // 2} "
+                         "(hd_twin.state.MAX_STATE_BYTES / 2)")
     new["history"] = (state.get("history", []) + [{"revision": new["revision"], "by": new["updated_by"], "keys": sorted(upd),
                                                      "wall_time": time.time()}])[-20:]
     return new
@@ -128,26 +155,40 @@ def validate_references(refs, source: str = "update") -> dict:
     return out
 
 
-def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.node import Node
     from rclpy.parameter import Parameter
     from std_msgs.msg import String
 
     from hd_onboard.node import declare, diag_status
 
-    class TwinNode(Node):
+    from hdphm.managed import ManagedNode, bring_up
+
+    class TwinNode(ManagedNode):
         def __init__(self):
             po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
             super().__init__(NODE_NAME, context=context, parameter_overrides=po,
                              start_parameter_services=param_services)
             self.p = declare(self, PARAMS)
+
+        def configure(self):
+            from hd_twin import state as sv
+
+            self.model_roots = sv.model_roots(self.p["model_roots"], self.p["model_dir"])
             self.state = initial_state(self.p["model_dir"], self.p["params_file"])
             self.pub = self.create_publisher(String, ru.TOPIC_TWIN_STATE, ru.qos("latched"))
             self.pub_diag = self.create_publisher(DiagnosticArray, ru.TOPIC_DIAGNOSTICS, ru.qos("diagnostics"))
             self.create_subscription(String, ru.TOPIC_TWIN_UPDATE, self._on_update, ru.qos("latched"))
             self.n_updates = self.n_refused = 0
-            self._seen: set[str] = set()
+            #: digests of the last MAX_SEEN updates (a latched update re-delivered after a restart is
+            #: skipped); bounded, and never the message text itself
+            self._seen: collections.OrderedDict[bytes, None] = collections.OrderedDict()
+            #: short summaries of the last MAX_REFUSALS refused updates (field, problem, size, digest)
+            self.refusals: collections.deque = collections.deque(maxlen=MAX_REFUSALS)
+            ru.contain_callbacks(self, "hdphm/twin")
+
+        def activate(self):
             self._publish()
 
         def _publish(self):
@@ -156,26 +197,35 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
             a.header.stamp = self.get_clock().now().to_msg()
             a.status = [diag_status("hdphm/twin", 0, f"revision {self.state['revision']}", "twin-core",
                                     {"model_version": self.state["model_version"], "updates": self.n_updates,
-                                     "refused": self.n_refused})]
+                                     "refused": self.n_refused,
+                                     "callback_errors": getattr(self, "n_callback_errors", 0)})]
             self.pub_diag.publish(a)
 
         def _on_update(self, msg):
-            if msg.data in self._seen:  # a latched update re-delivered after a restart
+            from hd_twin import state as sv
+
+            data = msg.data if isinstance(msg.data, str) else ""
+            key = hashlib.sha256(data.encode("utf-8", "replace")).digest()
+            if key in self._seen:  # a latched update re-delivered after a restart
                 return
-            self._seen.add(msg.data)
+            self._seen[key] = None
+            while len(self._seen) > MAX_SEEN:
+                self._seen.popitem(last=False)
             try:
-                upd = ru.parse_json_msg(msg, ru.TOPIC_TWIN_UPDATE)
-                self.state = apply_update(self.state, upd, ru.TOPIC_TWIN_UPDATE)
+                upd = sv.parse_json(data, ru.TOPIC_TWIN_UPDATE, sv.MAX_UPDATE_BYTES)
+                self.state = apply_update(self.state, upd, ru.TOPIC_TWIN_UPDATE, self.model_roots)
             except ValueError as e:
                 self.n_refused += 1
-                self.get_logger().error(f"twin update refused: {e}")
+                self.refusals.append(sv.summary_of_refusal(e, data, time.time()))
+                self.get_logger().warning(f"twin update refused: {str(e)[:300]}")
                 a = DiagnosticArray()
                 a.header.stamp = self.get_clock().now().to_msg()
-                a.status = [diag_status("hdphm/twin", 1, f"update refused: {str(e)[:180]}", "twin-core", {})]
+                a.status = [diag_status("hdphm/twin", 1, f"update refused: {str(e)[:180]}", "twin-core",
+                                        {"refused": self.n_refused})]
                 self.pub_diag.publish(a)
                 return
             self.n_updates += 1
             self.get_logger().info(f"twin revision {self.state['revision']} by {self.state['updated_by']}")
             self._publish()
 
-    return TwinNode()
+    return bring_up(TwinNode(), autostart)

@@ -39,6 +39,7 @@ spec                                              value
    "delta": d, "eps": e}``
 ``{"op": "exp_decay", "var": v, "v_s": s,         exp(-(abs(v)/s)**delta)
    "delta": d}``
+``{"op": "deadzone", "var": v, "width": d}``      sgn(v) max(abs(v) - d, 0)   (lost motion of half-width d)
 ``{"op": "prod", "factors": [spec, ...]}``        product of the factors
 ================================================  =============================================
 
@@ -75,7 +76,7 @@ CATALOG_NAMES = (
     "motor_thermal_drift",
 )
 TARGET_SIGNALS = ("tau_m", "Q_red")
-BASIS_OPS = ("const", "var", "sin", "cos", "sgn", "abs", "pow", "offset", "stribeck", "exp_decay", "prod")
+BASIS_OPS = ("const", "var", "sin", "cos", "sgn", "abs", "pow", "offset", "stribeck", "exp_decay", "deadzone", "prod")
 
 # ---------------------------------------------------------------------------
 # validation
@@ -116,6 +117,9 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
         _finite_number(spec.get("p"), f"{where}: 'p' of pow")
     elif op == "offset":
         _finite_number(spec.get("ref", 0.0), f"{where}: 'ref' of offset")
+    elif op == "deadzone":
+        if _finite_number(spec.get("width"), f"{where}: 'width' of deadzone") < 0:
+            raise ValueError(f"{where}: deadzone needs width >= 0, got {spec.get('width')}")
     elif op in ("stribeck", "exp_decay"):
         s = _finite_number(spec.get("v_s"), f"{where}: 'v_s' of {op}")
         d = _finite_number(spec.get("delta", 1.0), f"{where}: 'delta' of {op}")
@@ -216,6 +220,9 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
         return x**p
     if op == "offset":
         return x - float(spec.get("ref", 0.0))
+    if op == "deadzone":
+        a = xp.abs(x) - float(spec["width"])
+        return xp.sign(x) * (a + xp.abs(a)) / 2
     if op in ("stribeck", "exp_decay"):
         s, d = float(spec["v_s"]), float(spec.get("delta", 1.0))
         decay = xp.exp(-((xp.abs(x) / s) ** d))

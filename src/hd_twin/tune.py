@@ -6,7 +6,11 @@ validation NRMSE of Q_red on held-out actuators (the same actuator-level split
 for every trial, fixed by ``seed``). Intermediate values are reported per
 epoch so the median pruner can stop poor trials early. The study lives in any
 Optuna storage URL; default ``sqlite:///OUT/study.db`` so an interrupted
-search resumes where it stopped and several machines can share a study.
+search resumes where it stopped and several machines can share a study: start
+``hdphm tune --storage URL --study NAME --worker K`` once per process or machine
+(K = 0, 1, ... gives each its own sampler seed, so they do not propose the same
+trials); with a database server (``postgresql://user:pass@host/db``) that is
+all, with SQLite the processes must share the file's filesystem (docs/FLEET.md).
 """
 
 from __future__ import annotations
@@ -35,9 +39,28 @@ def suggest(trial, space: dict = SPACE) -> dict:
     }
 
 
+def _rdb_storage(optuna, url: str, tries: int = 6):
+    """An RDB storage for ``url``, retried: processes starting together race to create the schema (the
+    loser gets an IntegrityError / OperationalError and finds the schema made on the next try)."""
+    import time
+
+    from sqlalchemy.exc import IntegrityError, OperationalError
+
+    for k in range(tries):
+        try:
+            return optuna.storages.RDBStorage(
+                url, engine_kwargs={"connect_args": {"timeout": 60}} if url.startswith("sqlite") else {},
+                heartbeat_interval=60, grace_period=180)
+        except (IntegrityError, OperationalError):
+            if k == tries - 1:
+                raise
+            time.sleep(0.5 * (k + 1))
+    raise AssertionError("unreachable")
+
+
 def run_study(bags: Sequence[str] | Sequence, n_trials: int, storage: str | None, study_name: str, out_dir: str | Path,
               epochs: int | None = None, seed: int = 0, threads: int = 1, base_preset: str = "small",
-              missions: Sequence | None = None, space: dict = SPACE) -> dict:
+              missions: Sequence | None = None, space: dict = SPACE, worker: int = 0) -> dict:
     """Run (or resume) a TPE study; writes ``OUT/best.json`` and trains nothing else. Returns the best trial."""
     import optuna
 
@@ -51,7 +74,14 @@ def run_study(bags: Sequence[str] | Sequence, n_trials: int, storage: str | None
         missions = load_missions(bags)
     keys = [(str(m.meta.actuator_id), mission_label(m)) for m in missions]
     split = D.split_missions(keys, 0.25, seed)
-    sampler = optuna.samplers.TPESampler(seed=seed, n_startup_trials=min(5, max(1, n_trials // 3)))
+    if not 0 <= int(worker) < 10**6:
+        raise ValueError(f"tune: worker number {worker} must be in 0..1e6")
+    # each worker process of a shared study gets its own sampler seed (else they propose the same trials)
+    sampler = optuna.samplers.TPESampler(seed=seed + 7919 * int(worker), n_startup_trials=min(5, max(1, n_trials // 3)))
+    if isinstance(storage, str) and storage.startswith(("sqlite", "postgresql", "mysql")):
+        # several processes on one study: wait for SQLite's lock instead of failing; a heartbeat marks the
+        # running trials of a killed process FAIL so they do not stay RUNNING forever
+        storage = _rdb_storage(optuna, storage)
     study = optuna.create_study(study_name=study_name, storage=storage, direction="minimize", sampler=sampler,
                                 pruner=optuna.pruners.MedianPruner(n_startup_trials=3, n_warmup_steps=2),
                                 load_if_exists=True)
@@ -75,9 +105,9 @@ def run_study(bags: Sequence[str] | Sequence, n_trials: int, storage: str | None
         return v["nrmse_pct"]
 
     done = len([t for t in study.trials if t.state.is_finished()])
-    print(f"study {study_name!r} in {storage}: {done} finished trials, running {n_trials} more", file=sys.stderr)
+    print(f"study {study_name!r} in {getattr(storage, 'url', storage)}: {done} finished trials, running {n_trials} more", file=sys.stderr)
     study.optimize(objective, n_trials=n_trials, catch=(FloatingPointError,))
-    best = {"study": study_name, "storage": storage, "n_trials": len(study.trials),
+    best = {"study": study_name, "storage": getattr(storage, "url", storage), "worker": int(worker), "n_trials": len(study.trials),
             "best_value_nrmse_pct": study.best_value, "best_params": study.best_params,
             "best_user_attrs": study.best_trial.user_attrs}
     (out / "best.json").write_text(json.dumps(best, indent=2))

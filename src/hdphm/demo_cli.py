@@ -2,7 +2,9 @@
 
 1. simulate a small fleet of actuators from new to failure (``hd_sim``);
 2. train a ``small`` physics-informed twin on the training actuators and export it to ONNX (``hd_twin``);
-3. fit the prognostic observation model and Archard prior on the training actuators (``hd_prognostic``);
+3. write the training actuators' failures as an operator's events file (``events_train.csv``: the mission each
+   was found failed at) and fit the prognostic life model on their contract bags and those events alone
+   (``hd_prognostic.lifemodel``, what ``hdphm prognostic fit`` does; no wear truth);
 4. replay the held-out actuator's whole life through the ROS 2 stack (twin core, onboard, prognostic,
    ground nodes) and record everything to MCAP;
 5. print fault flags, health and RUL, and score the RUL against the simulator's truth.
@@ -62,24 +64,37 @@ def _train(fleet: Path, train_ids: list[str], out: Path, args) -> dict:
     return res.metrics
 
 
-def _fit_obs(fleet: Path, train_ids: list[str], out_json: Path, args):
-    from hd_prognostic.hd import extract_actuator, fit_population
+def _fit_life(fleet: Path, train_ids: list[str], truth: dict, out_json: Path, args):
+    """The operator's records of the training actuators (failure missions) -> events file -> life model."""
+    from hd_prognostic.hd import extract_actuator, unit_history
+    from hd_prognostic.lifemodel import EXPOSURES, UnitEvents, attach_events, fit_best, read_events, write_events
 
-    _say(f"3/5 fitting the observation model and Archard prior on {len(train_ids)} training actuators")
-    train = [extract_actuator(fleet / aid, include_truth=True, cache=out_json.parent / f"features_{aid}.json")
-             for aid in train_ids]
-    obs = fit_population(train)
-    obs.to_json(out_json)
-    return obs
+    ev_path = out_json.parent / "events_train.csv"
+    write_events(ev_path, {a["actuator_id"]: UnitEvents(failure=float(a["eol_mission"])) for a in truth["actuators"]
+                           if a["actuator_id"] in train_ids and a.get("eol_mission") is not None})
+    _say(f"3/5 fitting the life model on {len(train_ids)} training actuators' contract bags and their failures "
+         f"({ev_path.name}; no wear truth)")
+    acts = [extract_actuator(fleet / aid, include_truth=False, cache=out_json.parent / f"features_{aid}.json")
+            for aid in train_ids]
+    ev = read_events(ev_path)
+    cands = {}
+    for e in EXPOSURES:
+        units = [unit_history(a, "HF_MTW_IF", e) for a in acts]
+        attach_events(units, ev, str(ev_path))
+        cands[e] = units
+    m = fit_best(cands, feature="HF_MTW_IF")
+    m.to_json(out_json)
+    _say(f"    life model: clock '{m.exposure}' (maximum likelihood), {m.fit_info['n_failures']} failures")
+    return m
 
 
-def _replay(bags: list[Path], model_dir: Path, obs_json: Path, out_dir: Path) -> dict:
+def _replay(bags: list[Path], model_dir: Path, life_json: Path, out_dir: Path) -> dict:
     from hdphm.ros_cli import run_stack_on_bags
 
     _say(f"4/5 replaying {len(bags)} missions of the held-out actuator through the ROS 2 stack, "
          f"recording one MCAP per mission under {out_dir}")
     return run_stack_on_bags([str(b) for b in bags], model_dir=str(model_dir), out_mcap=str(out_dir), rate="max",
-                             obs_model=str(obs_json), split_per_mission=True)
+                             overrides={"prognostic": {"life_model": str(life_json)}}, split_per_mission=True)
 
 
 def _score_node(summary: dict, aid: str, eol: int | None) -> dict:
@@ -94,21 +109,28 @@ def _score_node(summary: dict, aid: str, eol: int | None) -> dict:
                            [r["rul_p95"] for r in rows], float(eol), alpha=0.2)
 
 
-def _score(fleet: Path, aid: str, obs_json: Path, out: Path, truth: dict, args) -> dict:
-    """Batch prognosis with the same core as the node, scored against the simulator's truth (scoring only)."""
+def _score(fleet: Path, aid: str, life_json: Path, out: Path, truth: dict, args) -> dict:
+    """Batch prognosis with the same model as the node, scored against the simulator's truth (scoring only)."""
     from hd_prognostic import metrics as M
-    from hd_prognostic.hd import extract_actuator, prognose
-    from hd_prognostic.observation import ObservationModel
+    from hd_prognostic.hd import extract_actuator, unit_history
+    from hd_prognostic.lifemodel import LifeModel, predict_history
     from hd_prognostic.plots import save_alpha_lambda
 
+    model = LifeModel.from_json(life_json)
     a = extract_actuator(fleet / aid, include_truth=False)
-    hist = prognose(a, ObservationModel.from_json(obs_json), seed=args.seed)
+    eol0 = next(x["eol_mission"] for x in truth["actuators"] if x["actuator_id"] == aid)
+    u = unit_history(a, model.feature, model.exposure)
+    if eol0 is not None:  # the bag of the mission it was found failed at is not flown: predict before it
+        keep = u.t < eol0
+        u.t, u.y, u.E = u.t[keep], u.y[keep], u.E[keep]
+    hist = predict_history(model, u, seed=args.seed)
     (out / f"rul_history_{aid}.json").write_text(json.dumps(hist.to_json(), indent=1))
     eol = next(x["eol_mission"] for x in truth["actuators"] if x["actuator_id"] == aid)
     if eol is None:
         return {"note": f"{aid} did not reach end of life within {args.max_missions} missions: nothing to score"}
     m = M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), alpha=0.2, samples=hist.samples,
                         rul_horizon=hist.meta.get("rul_horizon"))
+    m.pop("pit", None)
     save_alpha_lambda(out / f"alpha_lambda_{aid}.png", hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), 0.2,
                       title=f"{aid}: RUL (held-out actuator)", unit="missions")
     m["eol_mission"] = eol
@@ -128,12 +150,12 @@ def run_demo(args) -> int:
         return 2
     test_id, train_ids = ids[-1], ids[:-1]
     twin_metrics = _train(fleet, train_ids, out / "twin", args)
-    obs_json = out / "obs_model.json"
-    _fit_obs(fleet, train_ids, obs_json, args)
+    life_json = out / "life_model.json"
+    _fit_life(fleet, train_ids, truth, life_json, args)
     bags = _bags_of(fleet, test_id)
-    summary = _replay(bags, out / "twin", obs_json, out / f"stack_{test_id}")
+    summary = _replay(bags, out / "twin", life_json, out / f"stack_{test_id}")
     _say("5/5 scoring the RUL of the held-out actuator against the simulator's truth (evaluation only)")
-    score = _score(fleet, test_id, obs_json, out, truth, args)
+    score = _score(fleet, test_id, life_json, out, truth, args)
     score["node"] = _score_node(summary, test_id, score.get("eol_mission"))
 
     report = {"held_out_actuator": test_id, "training_actuators": train_ids, "twin": twin_metrics.get("validation"),
@@ -142,7 +164,14 @@ def run_demo(args) -> int:
               "recorded_files": len(summary.get("recorded_files") or []),
               "rul_score": score, "wall_s": time.perf_counter() - t_start}
     (out / "report.json").write_text(json.dumps(report, indent=1, default=str))
+    (out / "stack_summary.json").write_text(json.dumps(
+        {k: summary.get(k) for k in ("flags", "health", "health_history", "n_warn", "n_error", "speedup", "twin")},
+        indent=1, default=str))
     _print_report(report, summary)
+    from hdphm.report import write_report
+
+    page = write_report(out, out / "report.html", title=f"hdphm demo: held-out actuator {test_id}")
+    print(f"report page (open in a browser, works offline): {page}")
     return 0
 
 

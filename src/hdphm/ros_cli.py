@@ -45,9 +45,12 @@ CONFIG_DIR = Path(__file__).resolve().parents[2] / "ros2_ws" / "config"
 # --------------------------------------------------------------------------
 # building nodes
 # --------------------------------------------------------------------------
-def make_node(name: str, context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+def make_node(name: str, context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
+              autostart: bool = True):
     """Instantiate one of the four stack nodes by name (``param_services=False``: no ``ros2 param`` services,
-    fewer entities for the executor to wait on; used by the in-process replay job)."""
+    fewer entities for the executor to wait on; used by the in-process replay job). The nodes are managed
+    (lifecycle) nodes: ``autostart`` configures and activates them at once; ``autostart=False`` leaves them
+    unconfigured for a lifecycle manager (``hdphm.managed``)."""
     if name == "onboard":
         from hd_onboard.node import make_node as mk
     elif name == "twin":
@@ -58,7 +61,7 @@ def make_node(name: str, context=None, overrides: dict[str, Any] | None = None, 
         from hd_ground.node import make_node as mk
     else:
         raise ValueError(f"unknown node {name!r}; one of {', '.join(NODES)}")
-    return mk(context=context, overrides=overrides, param_services=param_services)
+    return mk(context=context, overrides=overrides, param_services=param_services, autostart=autostart)
 
 
 def ros_args_for(name: str, extra: list[str] | None) -> list[str]:
@@ -859,6 +862,9 @@ def _pop_domain(args) -> None:
     ra = list(args.ros_args or [])
     end = ra.index("--ros-args") if "--ros-args" in ra else len(ra)
     head, tail = ra[:end], ra[end:]
+    if hasattr(args, "managed") and "--managed" in head:
+        args.managed = True
+        head.remove("--managed")
     opts = ("--domain-id", "--rt-priority") if hasattr(args, "rt_priority") else ("--domain-id",)
     for opt in opts:
         for k, tok in enumerate(head):
@@ -876,6 +882,26 @@ def _pop_domain(args) -> None:
     args.ros_args = tail
 
 
+def _stop_on_signals() -> dict:
+    """SIGINT and SIGTERM set ``stop["v"]`` (Python handlers, installed after rclpy's): the spin loops below
+    poll it every 0.1 s, so a node, the stack or the recorder stops promptly on Ctrl-C or SIGTERM (rclpy's
+    own handler left a node without timers, the twin, blocked in its wait set)."""
+    stop = {"v": False, "sig": None}
+
+    def on_sig(signum, _frame):
+        stop["v"] = True
+        stop["sig"] = signum
+
+    signal.signal(signal.SIGINT, on_sig)
+    signal.signal(signal.SIGTERM, on_sig)
+    return stop
+
+
+def _spin_until_stopped(ex, stop: dict, end: float | None = None) -> None:
+    while not stop["v"] and (end is None or time.monotonic() < end):
+        ex.spin_once(timeout_sec=0.1)
+
+
 def cmd_node(args) -> int:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -890,11 +916,17 @@ def cmd_node(args) -> int:
         print(f"hdphm node: {'SCHED_FIFO priority %d' % args.rt_priority if not why else 'not real-time: ' + why}",
               file=sys.stderr)
     ctx = ru.init_context(args.domain_id, ros_args_for(args.name, args.ros_args))
-    node = make_node(args.name, ctx)
+    # handlers before the node exists: a signal that comes while it configures (it may already publish)
+    # stops the loop below at once instead of raising KeyboardInterrupt
+    stop = _stop_on_signals()
+    node = make_node(args.name, ctx, autostart=not args.managed)
+    if args.managed:
+        print(f"hdphm node: {args.name} is unconfigured, waiting for a lifecycle manager "
+              f"(services /{node.get_name()}/change_state, /{node.get_name()}/get_state)", file=sys.stderr)
     ex = ru.make_executor(ctx)
     ex.add_node(node)
     try:
-        ex.spin()
+        _spin_until_stopped(ex, stop)
     except KeyboardInterrupt:
         pass
     finally:
@@ -917,8 +949,9 @@ def cmd_stack(args) -> int:
     st = Stack(args.domain_id, record=args.record, args=argv)
     print(f"hdphm stack: nodes {', '.join(st.nodes)} in one process (domain {args.domain_id or os.environ.get('ROS_DOMAIN_ID', 0)}); Ctrl-C stops",
           file=sys.stderr)
+    stop = _stop_on_signals()
     try:
-        st.ex.spin()
+        _spin_until_stopped(st.ex, stop)
     except KeyboardInterrupt:
         pass
     finally:
@@ -932,12 +965,37 @@ def cmd_replay(args) -> int:
     from hdphm import rosutil as ru
 
     rate = "max" if args.rate == "max" else float(args.rate)
+    for b in args.bags:  # a bag that cannot be opened fails before any waiting or publishing: one line
+        try:
+            from hd_bag import read_metadata
+
+            read_metadata(b)
+            next(iter(BagSource(b).blocks()), None)
+        except (ValueError, OSError) as e:
+            line = str(e).splitlines()[0] if str(e) else type(e).__name__
+            print(f"hdphm replay: {line if line.startswith(str(b)) else f'{b}: {line}'}", file=sys.stderr)
+            return 2
     ctx = ru.init_context(args.domain_id)
     node = Node("hdphm_replay", context=ctx)
     rep = Replayer(node, rate)
+    # every expected reader (e.g. the stack and a recorder: --wait-for 2) on every contract topic and on
+    # /hd/mission before the first sample: starting when the first one matched cost a recorder 0.5 s
+    want = max(int(args.wait_for), 1)
+    pubs = list(rep.pubs.values()) + [rep.pub_mission]
     deadline = time.monotonic() + args.wait_s
-    while time.monotonic() < deadline and rep.pubs[ru.TOPIC_JOINT_STATES].get_subscription_count() == 0:
+    while time.monotonic() < deadline and min(p.get_subscription_count() for p in pubs) < want:
         time.sleep(0.05)
+    have = min(p.get_subscription_count() for p in pubs)
+    if have < want:
+        print(f"hdphm replay: only {have} of {want} expected subscribers on every topic after {args.wait_s:g} s "
+              f"({', '.join(f'{p.topic_name} {p.get_subscription_count()}' for p in pubs)})"
+              + ("; not replaying (--wait-for)" if args.wait_for else "; replaying anyway"), file=sys.stderr)
+        if args.wait_for:
+            node.destroy_node()
+            import rclpy
+
+            rclpy.try_shutdown(context=ctx)
+            return 2
     t0 = time.perf_counter()
     try:
         for b in args.bags:
@@ -945,8 +1003,8 @@ def cmd_replay(args) -> int:
             print(f"{b}: " + ", ".join(f"{k} {v}" for k, v in c.items()), file=sys.stderr)
         for p in rep.pubs.values():
             p.wait_for_all_acked()
-    except ValueError as e:
-        print(f"hdphm replay: {e}", file=sys.stderr)
+    except (ValueError, OSError) as e:  # a bad bag: one line naming the file, no traceback
+        print(f"hdphm replay: {str(e).splitlines()[0] if str(e) else type(e).__name__}", file=sys.stderr)
         return 2
     finally:
         wall = time.perf_counter() - t0
@@ -959,7 +1017,7 @@ def cmd_replay(args) -> int:
     return 0
 
 
-def _drain(ex, rec, quiet_spins: int = 3, max_s: float = 10.0) -> None:
+def _drain(ex, rec, quiet_spins: int = 3, max_s: float = 0.5) -> None:
     """On stop: file what the middleware already delivered to the recorder's readers (keep spinning
     until ``quiet_spins`` spins in a row record nothing, at most ``max_s``), so a SIGTERM loses no
     message that arrived before it."""
@@ -991,12 +1049,7 @@ def cmd_record(args) -> int:
         return 2
     ex = ru.make_executor(ctx)
     ex.add_node(node)
-    stop = {"v": False}
-
-    def on_term(*_):
-        stop["v"] = True
-
-    signal.signal(signal.SIGTERM, on_term)
+    stop = _stop_on_signals()  # SIGINT too: rclpy's handler shut the context down before the drain
     end = time.monotonic() + args.duration if args.duration else None
     try:
         while not stop["v"] and (end is None or time.monotonic() < end):
@@ -1004,10 +1057,14 @@ def cmd_record(args) -> int:
     except KeyboardInterrupt:
         pass
     finally:
+        t_stop = time.monotonic()
         _drain(ex, rec)
         rec.close()
+        t_closed = time.monotonic()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
+    print(f"stopped: drained and closed in {t_closed - t_stop:.2f} s, shut down in {time.monotonic() - t_closed:.2f} s",
+          file=sys.stderr)
     print(f"recorded {sum(rec.counts.values())} messages to {len(rec.files)} file(s) under {args.out}: "
           + ", ".join(f"{k} {v}" for k, v in rec.counts.items() if v), file=sys.stderr)
     return 0
@@ -1049,20 +1106,27 @@ def register(sub) -> None:
     p.add_argument("--rt-priority", type=int, default=0, choices=range(0, 100), metavar="0-99",
                    help="run the process SCHED_FIFO at this priority (middleware receive threads included; "
                         "worker threads stay normal); needs CAP_SYS_NICE; 0: normal scheduling")
+    p.add_argument("--managed", action="store_true",
+                   help="leave the node unconfigured: a lifecycle manager configures and activates it through "
+                        "/NODE/change_state (default: configure and activate at start)")
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args -p name:=value ...")
-    p.set_defaults(func=cmd_node)
+    p.set_defaults(func=cmd_node, fast_exit=True)
 
     p = sub.add_parser("stack", help="run all four nodes in one process")
     p.add_argument("--domain-id", type=int, default=None)
     p.add_argument("--record", default=None, help="also record to this MCAP file")
     p.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args -p onboard.param:=value ...")
-    p.set_defaults(func=cmd_stack)
+    p.set_defaults(func=cmd_stack, fast_exit=True)
 
     p = sub.add_parser("replay", help="publish bags on the contract topics with their original stamps")
     p.add_argument("bags", nargs="+")
     p.add_argument("--rate", default="1.0", help="1.0 = real time, 'max' = as fast as the subscribers take it")
     p.add_argument("--domain-id", type=int, default=None)
-    p.add_argument("--wait-s", type=float, default=5.0, help="wait this long for a subscriber before starting")
+    p.add_argument("--wait-s", type=float, default=5.0, help="wait this long for the subscribers before starting")
+    p.add_argument("--wait-for", type=int, default=0, metavar="N",
+                   help="start only when N subscribers (e.g. 2: the stack and a recorder) match every contract "
+                        "topic and /hd/mission; exit 2 if they do not within --wait-s (0: wait for one, then "
+                        "start anyway)")
     p.set_defaults(func=cmd_replay)
 
     p = sub.add_parser("record", help="record /hd/..., /diagnostics and stack topics to MCAP")
@@ -1072,4 +1136,4 @@ def register(sub) -> None:
     p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: until Ctrl-C/SIGTERM)")
     p.add_argument("--split-per-mission", action="store_true",
                    help="--out is a directory; one contract bag per /hd/mission (default: one stack log file)")
-    p.set_defaults(func=cmd_record)
+    p.set_defaults(func=cmd_record, fast_exit=True)

@@ -240,18 +240,43 @@ def make_executor(context, kind: str | None = None):
     return SingleThreadedExecutor(context=context)
 
 
+#: Interface packages of the ROS distribution whose message modules may be imported to subscribe to a
+#: topic (``pkg.msg`` of these packages only): a type name advertised on the graph or written in a bag
+#: selects a class from this fixed set, it never names a module to import (issue 13: a participant
+#: advertising ``evilpkg/msg/X`` would have made the recorder import ``evilpkg.msg``).
+MESSAGE_PACKAGES = frozenset((
+    "std_msgs", "sensor_msgs", "diagnostic_msgs", "geometry_msgs", "builtin_interfaces", "rcl_interfaces",
+    "nav_msgs", "trajectory_msgs", "shape_msgs", "stereo_msgs", "visualization_msgs", "tf2_msgs",
+    "action_msgs", "unique_identifier_msgs", "statistics_msgs", "rosgraph_msgs", "lifecycle_msgs",
+    "type_description_interfaces", "service_msgs",
+))
+_NAME_RE = None
+
+
 def message_class(type_name: str):
-    """Message class from a type string ``pkg/msg/Name`` (or ``pkg/Name``)."""
-    parts = type_name.split("/")
+    """Message class from a type string ``pkg/msg/Name`` (or ``pkg/Name``) of a package in
+    :data:`MESSAGE_PACKAGES`; ValueError for anything else (nothing is imported for it)."""
+    import re
+
+    global _NAME_RE
+    if _NAME_RE is None:
+        _NAME_RE = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,127}")
+    parts = str(type_name).split("/")
     if len(parts) == 2:
         parts = [parts[0], "msg", parts[1]]
-    if len(parts) != 3 or not all(parts):
-        raise ValueError(f"not a ROS message type name: {type_name!r}")
+    if len(parts) != 3 or not all(parts) or parts[1] != "msg" or not _NAME_RE.fullmatch(parts[2]):
+        raise ValueError(f"not a ROS message type name: {str(type_name)[:80]!r}")
+    if parts[0] not in MESSAGE_PACKAGES:
+        raise ValueError(f"message type {type_name!r} is not in the fixed table of interface packages "
+                         f"(hdphm.rosutil.MESSAGE_PACKAGES); not imported")
     try:
-        mod = importlib.import_module(f"{parts[0]}.{parts[1]}")
-        return getattr(mod, parts[2])
+        mod = importlib.import_module(f"{parts[0]}.msg")
+        cls = getattr(mod, parts[2])
     except (ImportError, AttributeError):
         raise ValueError(f"message type {type_name!r} is not installed in this environment") from None
+    if not hasattr(cls, "_TYPE_SUPPORT") and not hasattr(type(cls), "_TYPE_SUPPORT"):
+        raise ValueError(f"{type_name!r} is not a message class")
+    return cls
 
 
 _SHARE_DIRS: list[Path] | None = None
@@ -336,6 +361,11 @@ _U32 = struct.Struct("<I")
 _STAMP = struct.Struct("<iI")
 
 
+#: caps of the live decoders (the same as the bag reader's: hd_bag.cdr.MAX_JOINTS, MAX_MESSAGE_BYTES)
+MAX_JOINTS = 64
+MAX_JOINTSTATE_BYTES = 64 << 10
+
+
 class CdrError(ValueError):
     """A serialized message that does not decode as the expected type."""
 
@@ -350,6 +380,8 @@ def decode_joint_state(buf: bytes) -> tuple[int, str, list[str], np.ndarray, np.
     try:
         if len(buf) < 16:
             raise CdrError(f"JointState message of {len(buf)} bytes is too short")
+        if len(buf) > MAX_JOINTSTATE_BYTES:
+            raise CdrError(f"JointState message of {len(buf)} bytes is above the cap of {MAX_JOINTSTATE_BYTES}")
         if buf[1] != 1:
             raise CdrError("JointState message is not little-endian CDR (encapsulation kind %d)" % buf[1])
         sec, nsec = _STAMP.unpack_from(buf, 4)
@@ -361,8 +393,8 @@ def decode_joint_state(buf: bytes) -> tuple[int, str, list[str], np.ndarray, np.
         p = (p + 3) & ~3
         (cnt,) = _U32.unpack_from(buf, p)
         p += 4
-        if cnt > 1024:
-            raise CdrError(f"JointState with {cnt} names is not plausible")
+        if cnt > MAX_JOINTS:
+            raise CdrError(f"JointState with {cnt} names is above the cap of {MAX_JOINTS} joints")
         names = []
         for _ in range(cnt):
             p = (p + 3) & ~3
@@ -375,6 +407,8 @@ def decode_joint_state(buf: bytes) -> tuple[int, str, list[str], np.ndarray, np.
             p = (p + 3) & ~3
             (cnt,) = _U32.unpack_from(buf, p)
             p += 4
+            if cnt > MAX_JOINTS:
+                raise CdrError(f"JointState array of {cnt} values is above the cap of {MAX_JOINTS} joints")
             if cnt:
                 # doubles aligned to 8 relative to the start of the CDR body (after the 4-byte header)
                 p = 4 + ((p - 4 + 7) & ~7)
@@ -520,15 +554,72 @@ def _json_safe(o: Any) -> Any:
     return o
 
 
-def parse_json_msg(msg, what: str) -> dict:
-    """Decode a JSON ``std_msgs/String``; raises ValueError naming ``what`` when it is not a JSON object."""
-    try:
-        obj = json.loads(msg.data)
-    except (json.JSONDecodeError, TypeError) as e:
-        raise ValueError(f"{what}: not valid JSON ({e})") from None
-    if not isinstance(obj, dict):
-        raise ValueError(f"{what}: expected a JSON object, got {type(obj).__name__}")
-    return obj
+#: Caps of :func:`parse_json_msg` (mission metadata, reports; the twin state has its own, larger cap).
+MAX_JSON_BYTES = 1 << 20
+MAX_JSON_DEPTH = 8
+
+
+def parse_json_msg(msg, what: str, max_bytes: int = MAX_JSON_BYTES, max_depth: int = MAX_JSON_DEPTH) -> dict:
+    """Decode a JSON ``std_msgs/String``; raises ValueError naming ``what`` when it is not a JSON object,
+    is longer than ``max_bytes``, nests deeper than ``max_depth`` or holds NaN/Infinity."""
+    from hd_twin.state import parse_json
+
+    return parse_json(getattr(msg, "data", None), what, max_bytes, max_depth)
+
+
+def contain_callbacks(node, diag_name: str | None = None) -> None:
+    """Wrap every subscription and timer callback of ``node`` (call at the end of its ``__init__``, before
+    it is added to an executor): an exception is logged, counted in ``node.n_callback_errors`` and
+    reported on ``/diagnostics`` (ERROR, at most once a second), and the node goes on; one message can
+    no longer take a node, or a whole ``hdphm stack``, down."""
+    import time as _time
+    import traceback
+
+    node.n_callback_errors = 0
+    node.last_callback_error = ""
+    last = {"t": -1e9}
+    name = diag_name or f"hdphm/{node.get_name()}"
+
+    def wrap(fn, what):
+        if getattr(fn, "_hdphm_contained", False):
+            return fn
+
+        def contained(*a, **k):
+            try:
+                return fn(*a, **k)
+            except Exception as e:  # noqa: BLE001 - containment is the point
+                node.n_callback_errors += 1
+                text = f"{what} callback failed ({type(e).__name__}: {str(e)[:200]}); node continues"
+                node.last_callback_error = text
+                now = _time.monotonic()
+                if now - last["t"] >= 1.0:
+                    last["t"] = now
+                    tb = traceback.extract_tb(e.__traceback__)
+                    where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
+                    node.get_logger().error(text + where + f" [{node.n_callback_errors} so far]")
+                    pub = getattr(node, "pub_diag", None)
+                    if pub is not None:
+                        try:
+                            from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+                            st = DiagnosticStatus(name=f"{name}/callbacks", level=DiagnosticStatus.ERROR,
+                                                  message=text[:250], hardware_id=node.get_name())
+                            st.values = [KeyValue(key="callback_errors", value=str(node.n_callback_errors))]
+                            arr = DiagnosticArray(status=[st])
+                            arr.header.stamp = node.get_clock().now().to_msg()
+                            pub.publish(arr)
+                        except Exception:  # noqa: BLE001 - reporting must not fail the containment
+                            pass
+                return None
+
+        contained._hdphm_contained = True
+        contained.__wrapped__ = fn
+        return contained
+
+    for sub in list(getattr(node, "subscriptions", [])):
+        sub.callback = wrap(sub.callback, sub.topic_name)
+    for tmr in list(getattr(node, "timers", [])):
+        tmr.callback = wrap(tmr.callback, "timer")
 
 
 def stamp_to_ns(stamp) -> int:

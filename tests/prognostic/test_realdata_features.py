@@ -10,9 +10,15 @@ from hd_onboard.features import StiffnessLaw, block_features, mission_features, 
 from hd_prognostic import realdata as R
 from hd_prognostic.observation import ObservationModel
 
+from tests.prognostic.lifesynth import MEASURED
 
+needs_data = pytest.mark.skipif(not (MEASURED / "nasa_battery").is_dir() or not (MEASURED / "virkler").is_dir(),
+                                reason="measured data folder not found (set HDPHM_MEASURED_DATA)")
+
+
+@needs_data
 def test_battery_loo_runs_and_beats_nothing_silly():
-    out = R.run_battery(cells=("B0005", "B0006"), eol_fracs=(0.7,), n_particles=300, t_start=60)
+    out = R.run_battery(MEASURED / "nasa_battery", cells=("B0005", "B0006"), eol_fracs=(0.7,), n_particles=300, t_start=60)
     assert set(out["units"]) == {"B0005@0.7", "B0006@0.7"}
     for u in out["units"].values():
         m = u["metrics"]
@@ -27,15 +33,16 @@ def test_battery_bad_file(tmp_path):
         R.load_battery("B9", tmp_path)
 
 
+@needs_data
 def test_virkler_units_and_paris_fit():
-    specs = R.load_virkler()
+    specs = R.load_virkler(MEASURED / "virkler")
     assert len(specs) == 68
     # failure at 49.8 mm between 200 k and 330 k cycles for every specimen (the known scatter)
     nf = np.array([s.N_fail for s in specs])
     assert nf.min() > 2.0e5 and nf.max() < 3.3e5
     fit = R.fit_paris(specs[::8])
     assert 2.5 < fit["m"] < 5.0
-    out = R.run_virkler(n_particles=300, max_specimens=2)
+    out = R.run_virkler(MEASURED / "virkler", n_particles=300, max_specimens=2)
     assert len(out["units"]) == 4
     assert out["aggregate"]["cra"] > 0.5
 
@@ -120,3 +127,24 @@ def test_derived_motor_angle_makes_ke_features_unobservable():
     f = block_features(m.t, m.theta_m, m.theta_m / 100.0, m.omega_m, m.omega_f, m.tau_m, m.Q_red, 100.0, 0.1)
     assert np.isnan(f["HF_MTW_IF"]) and any("derived" in n for n in f["notes"])
     assert np.isfinite(f["cs_gain"])  # the current-speed features do not need the output encoder
+
+
+@needs_data
+def test_battery_export_runs_through_the_life_model(tmp_path):
+    """The NASA cells as HI CSV + events (file arguments only), then fit and prognose on the CSV path."""
+    from hd_prognostic.lifemodel import read_events, read_hi_csv
+    from hdphm.cli import main as hdphm
+
+    assert hdphm(["prognostic", "battery", "--data", str(MEASURED / "nasa_battery"), "--export", str(tmp_path)]) == 0
+    units = {u.unit: u for u in read_hi_csv(tmp_path / "battery_hi.csv")}
+    ev = read_events(tmp_path / "battery_events.csv")
+    assert set(units) == {"B0005", "B0006", "B0007"}
+    for c, e in ev.items():  # failure = first cycle at or below 80 % of the rated 2 Ah
+        u = units[c]
+        k = int(np.flatnonzero(u.y <= 1.6)[0])
+        assert e.failure == u.t[k]
+    assert hdphm(["prognostic", "fit", str(tmp_path / "battery_hi.csv"), "--events", str(tmp_path / "battery_events.csv"),
+                  "--out", str(tmp_path / "m.json")]) == 0
+    assert hdphm(["prognose", str(tmp_path / "battery_hi.csv"), "--unit", "B0006", "--model", str(tmp_path / "m.json"),
+                  "--out", str(tmp_path / "p"), "--samples", "200", "--no-plots"]) == 0
+    assert json.loads((tmp_path / "p" / "rul_history.json").read_text())["unit"] == "B0006"

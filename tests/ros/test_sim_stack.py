@@ -80,6 +80,11 @@ def test_life_through_stack_onnx_twin_obs_model_split_recording(fleet, tmp_path,
         assert a.n == b.n and a.meta.mission_index == b.meta.mission_index
         np.testing.assert_array_equal(a.tau_m, b.tau_m)
     assert sum(s["recorded"].values()) >= sum(s["published"].values())
+    # the shipped Foxglove layout names only topics and fields (and table columns) these recordings hold
+    from hdphm.foxglove import check_layout, layout_paths, load_layout
+
+    assert len(layout_paths(load_layout())) >= 15
+    assert check_layout(files[-1]) == []
 
 
 def test_healthy_then_faulted_sim_bags_flags_only_after_onset(fleet, tmp_path, domain_id):
@@ -150,6 +155,23 @@ def test_ground_node_recalibrates_and_pushes_thresholds(fleet, tmp_path, domain_
             assert onb.core.stiffness_status()["reference"] == "ground"
         if "friction" in refs:
             assert onb.core.friction_status()["reference"] == "ground"
+        # analysis on request: the std_srvs/Trigger service answers at once and a second report follows
+        from std_srvs.srv import Trigger
+
+        from hd_ground.node import SERVICE_ANALYSE
+
+        cli = st.aux.create_client(Trigger, SERVICE_ANALYSE)
+        assert cli.wait_for_service(timeout_sec=10.0)
+        fut = cli.call_async(Trigger.Request())
+        end = time.monotonic() + 10
+        while time.monotonic() < end and not fut.done():
+            st.spin_for(0.05)
+        assert fut.done() and fut.result().success, fut.result()
+        n0 = len(reports)
+        end = time.monotonic() + 120
+        while time.monotonic() < end and len(reports) == n0:
+            st.spin_for(0.1)
+        assert len(reports) == n0 + 1 and gr.n_runs == 2 and gr.error is None
     finally:
         st.close()
 

@@ -275,6 +275,20 @@ def test_family_draws_are_seeded_and_structural():
     assert u.params == {**pop[0], "effect_scale": pop[0]["effect_scale"]} and u.drawn == {}
 
 
+@pytest.mark.parametrize("preset", ["default", "baseline"])
+def test_every_family_unit_builds(preset):
+    """Every unit a family draws (on either preset) gives a valid plant (e.g. a reachable hysteresis loop)."""
+    from hd_sim.families import FAMILIES, family_unit
+    from hd_sim.params import new_health
+    from hd_sim.plant import derived
+
+    for name in FAMILIES:
+        for p in sample_population(16, seed=0):  # seed 0 unit 4 once drew an unreachable hysteresis loop
+            u = family_unit(name, p, EffectSet.preset(preset), seed=0)
+            d = derived(u.params, u.effects, new_health())
+            assert d["friction_law"] == u.effects.law("friction_transition")
+
+
 def test_default_family_fleet_identical(tmp_path):
     from hd_sim.fleet import simulate_fleet
 

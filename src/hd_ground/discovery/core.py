@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hd_twin.identify import Shape, fit_separable
 from hd_twin.terms import basis_matrix, evaluate_terms
 
 from .data import Dataset, DiscoveryError
@@ -237,6 +238,20 @@ class _BlockGram:
         self.g = np.stack([Xs[block == b].T @ y[block == b] for b in self.blocks])
         self.yy = np.array([y[block == b] @ y[block == b] for b in self.blocks])
         self.Gt, self.gt = self.G.sum(0), self.g.sum(0)
+        self._Xs, self._y, self._masks = Xs, y, [block == b for b in self.blocks]
+
+    def update_columns(self, cols: list[int], X_new: np.ndarray) -> None:
+        """Replace columns ``cols`` by ``X_new`` (n_fit, len(cols)) (a candidate's shape changed)."""
+        sc = np.sqrt(np.mean(X_new**2, 0)) + 1e-300
+        self.scale[cols] = sc
+        self._Xs[:, cols] = X_new / sc
+        for i, m in enumerate(self._masks):
+            Xb = self._Xs[m]
+            blk = Xb[:, cols].T @ Xb
+            self.G[i][cols, :] = blk
+            self.G[i][:, cols] = blk.T
+            self.g[i][cols] = Xb[:, cols].T @ self._y[m]
+        self.Gt, self.gt = self.G.sum(0), self.g.sum(0)
 
     def coef(self, idx: list[int]) -> np.ndarray:
         """Least-squares coefficients on all blocks (unscaled units)."""
@@ -281,31 +296,21 @@ class _BlockGram:
         return self.yy - 2 * np.einsum("bi,bi->b", beta, gb) + np.einsum("bi,bij,bj->b", beta, Gb, beta)
 
 
-def _refine_stribeck(X_other, y_fit, sig, fit, cand, ctx):
-    """Least-squares (omega_s, delta) of a Stribeck column given the other columns; returns (w_s, delta, column)."""
-    from scipy.optimize import minimize_scalar
+def _has_sgn(b) -> bool:
+    if b is None:
+        return False
+    if b.get("op") in ("sgn", "stribeck"):
+        return True
+    return any(_has_sgn(f) for f in b.get("factors", []))
 
-    w = sig["omega_m"]
-    sg = np.tanh(w / ctx.sgn_eps)
 
-    def col(ws, d):
-        return np.exp(-((np.abs(w) / ws) ** d)) * sg
-
-    def sse(lws, d):
-        X = np.column_stack([X_other, col(np.exp(lws), d)[fit]])
-        b = _lstsq(X, y_fit)
-        if b[-1] <= 0:
-            return np.inf
-        return float(np.sum((y_fit - X @ b) ** 2))
-
-    w0 = float(cand.nonlinear["omega_s"])
-    best = (np.inf, w0, float(cand.nonlinear.get("delta", 1.0)))
-    for d in (0.5, 0.75, 1.0, 1.5, 2.0):
-        r = minimize_scalar(lambda lw: sse(lw, d), bounds=(np.log(w0) - 1.5, np.log(w0) + 1.5), method="bounded",
-                            options={"xatol": 1e-3})
-        if r.fun < best[0]:
-            best = (float(r.fun), float(np.exp(r.x)), d)
-    return best[1], best[2], col(best[1], best[2])
+def _shape_rows(fit: np.ndarray, max_rows: int = 24000) -> np.ndarray:
+    """Fit rows used by shape searches: all, or every k-th when there are more than ``max_rows``."""
+    idx = np.flatnonzero(fit)
+    k = max(1, int(np.ceil(len(idx) / max_rows)))
+    out = np.zeros(len(fit), bool)
+    out[idx[::k]] = True
+    return out
 
 
 def _lstsq(X, y):
@@ -330,8 +335,15 @@ def _paired_t(sse_a: np.ndarray, sse_b: np.ndarray) -> float:
     return float(d.sum() / se)
 
 
-def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Candidate, list[int]]], opt: Options):
-    """Forward group selection + backward pruning by leave-one-block-out CV. Returns (selected, trace)."""
+def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Candidate, list[int]]], opt: Options,
+                  reshape=None, confirm=None):
+    """Forward group selection + backward pruning by leave-one-block-out CV. Returns (selected, trace).
+
+    Candidates with nonlinear shapes: before each forward step ``reshape(gi, cur_idx)`` identifies the
+    group's shape given the current model (CV profile search) and updates its columns; it returns
+    False when no shape is admissible. A group is admitted only if ``confirm(gi, cur_idx)`` (the
+    shape's block-jackknife identification) returns (True, note).
+    """
     cur_idx = list(base_idx)
     cur = gram.cv_sse(cur_idx)
     selected: list[int] = []  # indices into groups
@@ -343,9 +355,12 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         for gi, (cand, cols) in enumerate(groups):
             if cand.family in fams_used:
                 continue
-            if cand.positive and gram.coef(cur_idx + cols)[-1] <= 0:
+            if cand.shapes and reshape is not None and not reshape(gi, cur_idx):
+                continue
+            trial = _model(base_idx, groups, selected + [gi])
+            if cand.positive and gram.coef(trial)[-1] <= 0:
                 continue  # the physics needs a positive coefficient: this variant is not that effect
-            per_fam.setdefault(cand.family, []).append((gi, gram.cv_sse(cur_idx + cols)))
+            per_fam.setdefault(cand.family, []).append((gi, gram.cv_sse(trial)))
         for fam, lst in per_fam.items():
             # variants of a family that explain the data equally well (within 10 % of the best variant's
             # improvement) are not distinguishable here: keep the first, i.e. the library's preferred reading
@@ -367,9 +382,19 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             rec["step"] = "stop"
             trace.append(rec)
             break
-        wald = gram.jackknife_wald(cur_idx + groups[gi][1], groups[gi][1])
+        tcols = _tcols(groups, gi)
+        wald = gram.jackknife_wald(_model(base_idx, groups, selected + [gi]), tcols)
         rec["wald"] = wald
-        if wald < _wald_threshold(len(groups[gi][1]), opt.wald_sigmas):
+        if wald >= _wald_threshold(len(tcols), opt.wald_sigmas) and cand.shapes and confirm:
+            shape_ok, shape_note = confirm(gi, cur_idx)
+            if not shape_ok:
+                # lowers the CV error, but its shape parameters are not identified by these data
+                rec["step"] = "reject (shape unidentified)"
+                rec["note"] = shape_note
+                trace.append(rec)
+                fams_used.add(cand.family)
+                continue
+        if wald < _wald_threshold(len(tcols), opt.wald_sigmas):
             # lowers the CV error, but its coefficients are not identified: leaving out one block moves them
             # by about their own size (a term soaking up what the others miss, differently in every block)
             rec["step"] = "reject (unidentified)"
@@ -380,14 +405,14 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         trace.append(rec)
         selected.append(gi)
         fams_used.add(cand.family)
-        cur_idx = cur_idx + groups[gi][1]
+        cur_idx = _model(base_idx, groups, selected)
         cur = e
     # backward: drop groups that no longer earn their place
     changed = True
     while changed and selected:
         changed = False
         for gi in list(selected):
-            idx = list(base_idx) + [c for gj in selected if gj != gi for c in groups[gj][1]]
+            idx = _model(base_idx, groups, [gj for gj in selected if gj != gi])
             e = gram.cv_sse(idx)
             t = _paired_t(e, cur)  # how many standard errors the group's removal raises the CV error
             if (e.sum() - cur.sum()) / cur.sum() < opt.min_gain / 2 or t < opt.se_rule:
@@ -401,20 +426,34 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             continue
         # identification in the final model: a group may lose it to one added after it (collinear groups
         # share the same structure); drop the least identified one, then look again
-        idx = list(base_idx) + [c for gj in selected for c in groups[gj][1]]
-        z = [(gram.jackknife_wald(idx, groups[gi][1]) / _wald_threshold(len(groups[gi][1]), opt.wald_sigmas), gi)
+        idx = _model(base_idx, groups, selected)
+        z = [(gram.jackknife_wald(idx, _tcols(groups, gi)) / _wald_threshold(len(_tcols(groups, gi)), opt.wald_sigmas),
+              gi)
              for gi in selected]
         zmin, gi = min(z)
         if zmin < 1.0:
             selected.remove(gi)
-            rest = list(base_idx) + [c for gj in selected for c in groups[gj][1]]
+            rest = _model(base_idx, groups, selected)
             e = gram.cv_sse(rest)
             trace.append({"step": "drop (unidentified)", "candidate": f"{groups[gi][0].name}[{groups[gi][0].family}]",
                           "loss": float((e.sum() - cur.sum()) / cur.sum()),
-                          "wald": float(zmin * _wald_threshold(len(groups[gi][1]), opt.wald_sigmas))})
+                          "wald": float(zmin * _wald_threshold(len(_tcols(groups, gi)), opt.wald_sigmas))})
             cur = e
             changed = True
     return selected, trace
+
+
+def _model(base_idx: list[int], groups, sel: list[int]) -> list[int]:
+    """Columns of the model baseline + groups ``sel`` (in that order); a group may replace baseline columns
+    (``Candidate.replace_idx``, e.g. a Stribeck group re-identifies the Coulomb transition and takes T_C)."""
+    gone = {c for gi in sel for c in getattr(groups[gi][0], "replace_idx", ())}
+    return [c for c in base_idx if c not in gone] + [c for gi in sel for c in groups[gi][1]]
+
+
+def _tcols(groups, gi) -> list[int]:
+    """Columns of group ``gi`` whose identification decides (a candidate may carry a re-shaped baseline column)."""
+    cand, cols = groups[gi]
+    return list(cols) if cand.test_cols is None else [cols[j] for j in cand.test_cols]
 
 
 def _wald_threshold(k: int, sigmas: float) -> float:
@@ -546,20 +585,44 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
 
     sf = {k: v[fit] for k, v in sig.items()}
     scale = float(np.quantile(np.abs(sf["omega_m"]), 0.9))
-    # near-hard sign: smoothing only below 0.1 % of the speed scale and never wider than the speed noise
-    # (a wider tanh would model a viscous-like ramp the friction does not have)
     sig_w = max(speed_noise_sigma(sf["omega_m"][ds.bag[fit] == b], ds.segment[fit][ds.bag[fit] == b])
                 for b in np.unique(ds.bag[fit]))
-    sgn_eps = max(min(1e-3 * scale, sig_w) if sig_w > 0 else 1e-3 * scale, 1e-5)
     excluded, st, ok = identifiability(sf, target, avail)
     statements += st
     if not ok:
         return SignalResult(identifiable=False, statements=statements, **empty)
+    y = sig[target]
+    srows = _shape_rows(fit)  # fit rows for shape searches (decimated when long)
 
-    # 1. baseline: columns, collinearity, fit
+    # 1. baseline: the friction transition through zero speed, tanh(omega_m / eps), with eps identified by
+    # the cross-validated profile search (hd_twin.identify); never a constant of one simulator
+    eps_fit = None
+    sgn_eps = max(sig_w, 1e-4 * scale, 1e-6)
+    lo_eps = hi_eps = sgn_eps
+    if target == "tau_m" and "omega_m" in avail and "bias" not in excluded and any(
+            _has_sgn(c.basis) for c in baseline_columns(target, avail, declared, extra_terms, 1.0, twin_params)[0]
+            if c.term is None):
+        lo_eps = max(sig_w / 10, 1e-4 * scale, 1e-6)
+        hi_eps = max(0.5 * scale, 10 * lo_eps)
+        s_rows = {k: v[srows] for k, v in sig.items()}
+
+        def design_eps(sh):
+            return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, sh["eps"], twin_params)[0],
+                                    s_rows)
+        bc = baseline_columns(target, avail, declared, extra_terms, 1.0, twin_params)[0]
+        eps_fit = fit_separable(y[srows], design_eps, [c.param for c in bc], ds.block[srows],
+                                [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)])
+        sgn_eps = eps_fit.shape["eps"]
+        statements.append(
+            f"friction transition through zero speed: tanh(omega_m / eps), eps = {sgn_eps:.3g} +- "
+            f"{eps_fit.shape_sd['eps']:.2g} rad/s (cross-validated profile search over {lo_eps:.3g}..{hi_eps:.3g} "
+            "rad/s, block jackknife)"
+            + ("" if eps_fit.identified["eps"] else "; not identified: " + "; ".join(eps_fit.notes)))
+        if sgn_eps < 2 * sig_w:
+            statements.append(f"eps is within 2x the speed-noise sigma {sig_w:.3g} rad/s: the transition is not "
+                              "resolved beyond the measurement noise (consistent with a hard sign)")
     cols, notes = baseline_columns(target, avail, declared, extra_terms, sgn_eps, twin_params)
     statements += notes
-    y = sig[target]
     Xb_all = _baseline_matrix(cols, sig)
     keep, st = _prune_collinear(Xb_all[fit], [c.param for c in cols])
     statements += st
@@ -568,6 +631,9 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     beta_b = _lstsq(Xb_all[fit], y[fit])
     r_base = y - Xb_all @ beta_b
     base_params = {c.param: float(b) for c, b in zip(cols, beta_b)}
+    if eps_fit is not None:
+        base_params["eps_omega"] = float(sgn_eps)
+        base_params["eps_omega_sd"] = float(eps_fit.shape_sd["eps"])
 
     # 2. residual structure: order spectra on the fit data
     spectra: list[OrderSpectrum] = []
@@ -594,7 +660,16 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         omega_low=float(np.quantile(np.abs(sf["omega_m"][moving]), 0.1)) if moving.any() else scale,
         sgn_eps=sgn_eps, t_ref=float(np.median(sf["temperature"])) if "temperature" in sf else 25.0,
         orders=orders, declared=set(declared), excluded=excluded,
+        eps_range=(lo_eps, hi_eps) if eps_fit is not None else None,
+        short_stroke={v: (float(np.median(sf[v])), float(np.ptp(sf[v]) / 2)) for v in ("theta_m", "theta_f")
+                      if v in avail and v in excluded and np.ptp(sf[v]) > 0 and "omega_m" not in excluded},
     )
+    if "windup" in avail:
+        wu = sf["windup"]
+        ctx.windup_scale = float(np.quantile(np.abs(wu), 0.9))
+        ctx.windup_noise = speed_noise_sigma(wu, ds.segment[fit])
+        if "windup_dot" in avail:
+            ctx.windup_dot_scale = float(np.quantile(np.abs(sf["windup_dot"]), 0.9))
     cands = build_candidates(ctx)
     groups: list[tuple[Candidate, list[int]]] = []
     Xc_cols = []
@@ -608,71 +683,142 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         j0 += M.shape[1]
         Xc_cols.append(M)
         groups.append((c, idx))
+        c.replace_idx = [j for j, bc in enumerate(cols) if bc.param in c.replaces]
     X_all = np.concatenate([Xb_all] + Xc_cols, 1) if Xc_cols else Xb_all
     gram = _BlockGram(X_all[fit], y[fit], ds.block[fit])
     base_idx = list(range(Xb_all.shape[1]))
-    sel, trace = select_groups(gram, base_idx, groups, opt)
+    s_rows = {k: v[srows] for k, v in sig.items()}
+    y_ref = float(np.sqrt(np.mean(y[srows] ** 2)))
 
-    # 4. refine the shape parameters of a selected Stribeck term (the grid only located it), then refit
-    for gi in sel:
+    def _shape_fit(gi, cur_idx, jackknife):
         cand, cix = groups[gi]
-        if "omega_s" in cand.nonlinear and len(cix) == 1:
-            others = base_idx + [c for gj in sel if gj != gi for c in groups[gj][1]]
-            w_s, delta, col = _refine_stribeck(X_all[fit][:, others], y[fit], sig, fit, cand, ctx)
-            cand.basis[0].update(v_s=w_s, delta=delta)
-            cand.nonlinear.update(omega_s=w_s, delta=delta)
-            X_all[:, cix[0]] = col
-    idx = base_idx + [c for gi in sel for c in groups[gi][1]]
-    beta = _lstsq(X_all[fit][:, idx], y[fit])
-    refit_params = {c.param: float(b) for c, b in zip(cols, beta[: len(cols)])}
-    terms, pos = [], len(cols)
-    for gi in sel:
+        keep_c = [c for c in cur_idx if c not in cand.replace_idx]
+        Xc = X_all[srows][:, keep_c]
+
+        def design(sh):
+            return np.column_stack([Xc, basis_matrix(cand.make_basis(sh), s_rows)])
+        names = [f"c{j}" for j in keep_c] + [f"g{j}" for j in cix]
+        return fit_separable(y[srows], design, names, ds.block[srows], cand.shapes, jackknife=jackknife,
+                             positive=[len(keep_c) + len(cix) - 1] if cand.positive else [])
+
+    def _apply(gi, res):
         cand, cix = groups[gi]
-        terms.append(cand.term(target, beta[pos : pos + len(cix)]))
-        pos += len(cix)
+        cand.set_shape(res.shape, res.shape_sd)
+        M = basis_matrix(cand.basis, sig)
+        X_all[:, cix] = M
+        gram.update_columns(cix, M[fit])
 
-    # 5. held-out scoring (optional per-bag offset of theta_m estimated on a calibration part)
-    score = heldout.copy()
-    offsets: dict = {}
-    base_pred = Xb_all @ beta[: len(cols)]
-    periodic_m = [t for t in terms if t.get("variable") == "theta_m" and t.get("order") is not None]
-    sig_eval = sig
-    if opt.angle_offset == "estimate":
-        shift = np.zeros(ds.n)
-        for b in np.unique(ds.bag[heldout]):
-            rows = np.flatnonzero(heldout & (ds.bag == b))
-            calib = rows[ds.tfrac[rows] < ds.tfrac[rows].min() + opt.calib_frac * np.ptp(ds.tfrac[rows])]
-            score[calib] = False
-            if not periodic_m:
-                continue
-            others = [t for t in terms if t not in periodic_m]
-            s_c = {k: v[calib] for k, v in sig.items()}
-            y_rest = y[calib] - base_pred[calib] - (evaluate_terms(others, s_c) if others else 0.0)
-            d = estimate_offset(periodic_m, s_c, y_rest)
-            offsets[ds.bag_names[b]] = d
-            shift[rows] = d
-        sig_eval = dict(sig)
-        sig_eval["theta_m"] = sig["theta_m"] + shift
-    X_eval = X_all if sig_eval is sig else np.concatenate(
-        [Xb_all] + [basis_matrix(c.basis, sig_eval) for c, _ in groups], 1) if groups else Xb_all
-    r_before = y - Xb_all @ beta_b
-    r_after = y - X_eval[:, idx] @ beta
-    eb = _err(r_before[score], y[score])
-    ea = _err(r_after[score], y[score]) if terms else dict(eb)
+    def reshape(gi, cur_idx):
+        """Identify the group's shape given the current model; False if no shape is admissible."""
+        res = _shape_fit(gi, cur_idx, jackknife=False)
+        if not np.isfinite(res.cv_rmse) or res.cv_rmse > 3 * y_ref:
+            return False  # only shapes with the wrong sign of a physics-signed coefficient
+        _apply(gi, res)
+        return True
 
-    # explained: fraction of the held-out baseline residual variance the effect removes when it alone is
-    # added to the baseline (refitted on the fit data); bounded above by 1
-    sse_b = float(np.sum(r_before[score] ** 2))
-    effects = []
-    for t, gi in zip(terms, sel):
-        ix1 = base_idx + groups[gi][1]
-        b1 = _lstsq(X_all[fit][:, ix1], y[fit])
-        sse1 = float(np.sum((y - X_eval[:, ix1] @ b1)[score] ** 2))
-        effects.append({"name": t["name"], "variable": t["variable"], "order": t["order"], "form": t["form"],
-                        "parameters": t["parameters"], "explained": (sse_b - sse1) / sse_b if sse_b > 0 else 0.0,
-                        "signal": target})
-    order = np.argsort([-e["explained"] for e in effects]) if effects else []
-    effects = [effects[i] for i in order]
+    confirmed: dict[int, tuple] = {}
+
+    def confirm(gi, cur_idx):
+        """CV profile + block jackknife of the shape given ``cur_idx``: (identified, notes)."""
+        key = tuple(sorted(cur_idx))
+        if gi in confirmed and confirmed[gi][0] == key:
+            return confirmed[gi][1]
+        res = _shape_fit(gi, cur_idx, jackknife=True)
+        _apply(gi, res)
+        cand = groups[gi][0]
+        ok_ = all(v for k, v in res.identified.items() if k not in cand.nuisance)
+        confirmed[gi] = (key, (ok_, "; ".join(n for n in res.notes if n.split(":")[0] not in cand.nuisance)))
+        return confirmed[gi][1]
+
+    sel, trace = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm)
+
+    # 4. final shapes of the selected shaped groups, each given all the others (CV profile + jackknife);
+    # a group whose shape is no longer identified in the final model leaves it
+    for gi in list(sel):
+        cand, cix = groups[gi]
+        if not cand.shapes:
+            continue
+        others = _model(base_idx, groups, [gj for gj in sel if gj != gi])
+        ok_, note = confirm(gi, others)
+        if not ok_:
+            sel.remove(gi)
+            trace.append({"step": "drop (shape unidentified)", "candidate": f"{cand.name}[{cand.family}]",
+                          "note": note})
+            statements.append(f"{cand.name}: its shape is not identified in the final model ({note}); left out")
+    while True:
+        idx = _model(base_idx, groups, sel)
+        beta_full = np.zeros(X_all.shape[1])  # coefficients of every column, 0 for those not in the model
+        beta_full[idx] = _lstsq(X_all[fit][:, idx], y[fit])
+        beta = beta_full[idx]
+        refit_params = {c.param: float(b) for c, b in zip(cols, beta_full[: len(cols)])}
+        terms = []
+        for gi in sel:
+            cand, cix = groups[gi]
+            terms.append(cand.term(target, beta_full[cix]))
+
+        # 5. held-out scoring (optional per-bag offset of theta_m estimated on a calibration part)
+        score = heldout.copy()
+        offsets: dict = {}
+        base_pred = Xb_all @ beta_full[: len(cols)]
+        periodic_m = [t for t in terms if t.get("variable") == "theta_m" and t.get("order") is not None]
+        sig_eval = sig
+        if opt.angle_offset == "estimate":
+            shift = np.zeros(ds.n)
+            for b in np.unique(ds.bag[heldout]):
+                rows = np.flatnonzero(heldout & (ds.bag == b))
+                calib = rows[ds.tfrac[rows] < ds.tfrac[rows].min() + opt.calib_frac * np.ptp(ds.tfrac[rows])]
+                score[calib] = False
+                if not periodic_m:
+                    continue
+                others = [t for t in terms if t not in periodic_m]
+                s_c = {k: v[calib] for k, v in sig.items()}
+                y_rest = y[calib] - base_pred[calib] - (evaluate_terms(others, s_c) if others else 0.0)
+                d = estimate_offset(periodic_m, s_c, y_rest)
+                offsets[ds.bag_names[b]] = d
+                shift[rows] = d
+            sig_eval = dict(sig)
+            sig_eval["theta_m"] = sig["theta_m"] + shift
+        X_eval = X_all if sig_eval is sig else np.concatenate(
+            [Xb_all] + [basis_matrix(c.basis, sig_eval) for c, _ in groups], 1) if groups else Xb_all
+        r_before = y - Xb_all @ beta_b
+        r_after = y - X_eval[:, idx] @ beta
+        eb = _err(r_before[score], y[score])
+        ea = _err(r_after[score], y[score]) if terms else dict(eb)
+
+        # explained: fraction of the held-out baseline residual variance the effect removes when it alone is
+        # added to the baseline (refitted on the fit data); bounded above by 1
+        # contribution: what the effect removes from the held-out error of the final model (the model refitted
+        # without it, minus the full model), as a fraction of the baseline's held-out residual
+        sse_b = float(np.sum(r_before[score] ** 2))
+        sse_full = float(np.sum(r_after[score] ** 2))
+        effects = []
+        for t, gi in zip(terms, sel):
+            ix1 = _model(base_idx, groups, [gi])
+            b1 = _lstsq(X_all[fit][:, ix1], y[fit])
+            sse1 = float(np.sum((y - X_eval[:, ix1] @ b1)[score] ** 2))
+            ix0 = _model(base_idx, groups, [gj for gj in sel if gj != gi])
+            b0 = _lstsq(X_all[fit][:, ix0], y[fit])
+            sse0 = float(np.sum((y - X_eval[:, ix0] @ b0)[score] ** 2))
+            effects.append({"name": t["name"], "variable": t["variable"], "order": t["order"], "form": t["form"],
+                            "parameters": t["parameters"], "explained": (sse_b - sse1) / sse_b if sse_b > 0 else 0.0,
+                            "contribution": (sse0 - sse_full) / sse_b if sse_b > 0 else 0.0, "signal": target})
+        order = np.argsort([-e["contribution"] for e in effects]) if effects else []
+        effects = [effects[i] for i in order]
+        sel_sorted = [sel[i] for i in order]
+        # the held-out data decide: an effect whose removal from the final model does not raise the held-out
+        # error (after the offset step, where there is one) is not an effect; the least useful one leaves the
+        # model, the rest are refitted, and the test is repeated
+        bad = [(e["contribution"], gi, e) for gi, e in zip(sel_sorted, effects) if e["contribution"] <= 0]
+        if not bad:
+            break
+        _, gi, e = min(bad, key=lambda b: b[0])
+        cand = groups[gi][0]
+        trace.append({"step": "drop (no held-out gain)", "candidate": f"{cand.name}[{cand.family}]",
+                      "explained": e["explained"], "contribution": e["contribution"]})
+        statements.append(f"{cand.name} ({cand.variable}, order {cand.order}) lowered the cross-validated error on the "
+                          f"fit blocks but not the held-out error (held-out contribution {e['contribution']:+.1%}, "
+                          f"alone {e['explained']:+.1%}): not an effect")
+        sel = [g for g in sel if g != gi]
     terms = [terms[i] for i in order]
     declared_after = list(declared)
     for e in effects:

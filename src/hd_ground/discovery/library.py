@@ -23,6 +23,7 @@ from typing import Callable
 
 import numpy as np
 
+from hd_twin.identify import Shape
 from hd_twin.terms import harmonic_amplitude_phase, make_term, sin_cos_pair
 
 
@@ -38,8 +39,23 @@ class Candidate:
     form: str  # formula with symbolic parameters
     to_parameters: Callable[[np.ndarray], dict] = field(repr=False, default=lambda c: {})
     requires: tuple[str, ...] = ()
-    nonlinear: dict = field(default_factory=dict)  # fixed shape parameters (e.g. omega_s, delta)
+    nonlinear: dict = field(default_factory=dict)  # shape parameters (e.g. omega_s, delta) and their SDs
     positive: bool = False  # physics requires a positive coefficient (e.g. T_S - T_C > 0)
+    # nonlinear shape parameters identified from the data (CV profile search, hd_twin.identify):
+    # ``make_basis(shape_dict)`` gives the basis at a shape; ``basis`` holds the current one
+    shapes: list[Shape] = field(default_factory=list)
+    make_basis: Callable[[dict], list[dict]] | None = field(repr=False, default=None)
+    short_stroke: bool = False  # a smooth term in an angle whose periodicity is not identifiable
+    test_cols: tuple[int, ...] | None = None  # columns whose identification decides (None: all)
+    nuisance: tuple[str, ...] = ()  # shapes re-identified with the group whose identification does not decide
+    replaces: tuple[str, ...] = ()  # baseline parameters whose columns the group replaces (e.g. "T_C")
+
+    def set_shape(self, shape: dict, sd: dict | None = None) -> None:
+        """Fix the shape parameters (and record their SDs): rebuilds ``basis``."""
+        self.basis = self.make_basis(shape)
+        self.nonlinear.update({k: float(v) for k, v in shape.items()})
+        for k, v in (sd or {}).items():
+            self.nonlinear[f"{k}_sd"] = float(v)
 
     def term(self, signal: str, coef) -> dict:
         """The fitted candidate as an ``hd_twin.terms`` term dict."""
@@ -66,6 +82,11 @@ class LibraryContext:
     declared: set[str] = field(default_factory=set)  # the twin's declared effects (never re-proposed)
     excluded: set[str] = field(default_factory=set)  # names/variables that cannot be identified on these data
     n_pole_pairs_hint: int | None = None
+    short_stroke: dict[str, tuple[float, float]] = field(default_factory=dict)  # angle -> (centre, half range)
+    eps_range: tuple[float, float] | None = None  # rad/s, search range of the friction transition width
+    windup_scale: float = 0.0  # rad, q90 of |w| (twist-side shape ranges)
+    windup_noise: float = 0.0  # rad, white-noise sigma of w
+    windup_dot_scale: float = 0.0  # rad/s, q90 of |w'|
 
 
 _BUILDERS: list[Callable[[LibraryContext], list[Candidate]]] = []
@@ -84,7 +105,7 @@ def build_candidates(ctx: LibraryContext) -> list[Candidate]:
         for c in b(ctx):
             if c.name in ctx.declared and c.name != "unknown":
                 continue
-            if c.name in ctx.excluded or (c.variable in ctx.excluded):
+            if c.name in ctx.excluded or (c.variable in ctx.excluded and not c.short_stroke):
                 continue
             if any(r not in ctx.available for r in c.requires):
                 continue
@@ -118,18 +139,33 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
     if ctx.target != "tau_m":
         return []
     out: list[Candidate] = []
-    # Stribeck: grid over the characteristic speed and the shape exponent.
-    lo = max(ctx.omega_low * 0.3, 1e-3)
+    # Stribeck: characteristic speed and shape exponent identified from the data (CV profile search), with
+    # the Coulomb transition width re-identified jointly: a low-speed rise the baseline's width absorbed
+    # (a steeper transition) is given back to the Stribeck term, not left for drag or bias terms
+    lo = max(ctx.omega_low * 0.05, 1e-3)
     hi = max(ctx.omega_scale * 0.6, lo * 2)
-    for w_s in np.geomspace(lo, hi, 16):
-        for delta in (0.5, 1.0, 1.5, 2.0):
-            out.append(Candidate(
-                "stribeck_friction", "stribeck", "omega_m", None,
-                [{"op": "stribeck", "var": "omega_m", "v_s": float(w_s), "delta": delta, "eps": ctx.sgn_eps}],
-                "(T_S - T_C) exp(-(|omega_m|/omega_s)^delta) sgn(omega_m)",
-                lambda c: {"T_S_minus_T_C": float(c[0])},
-                requires=("omega_m",), nonlinear={"omega_s": float(w_s), "delta": delta}, positive=True,
-            ))
+    e0 = ctx.sgn_eps
+
+    def stribeck_basis(sh):
+        eps = float(sh["eps"])
+        return [{"op": "sgn", "var": "omega_m", "eps": eps},
+                {"op": "stribeck", "var": "omega_m", "v_s": float(sh["omega_s"]), "delta": float(sh["delta"]),
+                 "eps": eps}]
+
+    sh0 = {"omega_s": float(np.sqrt(lo * hi)), "delta": 1.0, "eps": e0}
+    out.append(Candidate(
+        "stribeck_friction", "stribeck", "omega_m", None, stribeck_basis(sh0),
+        "T_C tanh(omega_m/eps) + (T_S - T_C) exp(-(|omega_m|/omega_s)^delta) tanh(omega_m/eps)",
+        lambda c: {"T_C": float(c[0]), "T_S_minus_T_C": float(c[1])},
+        requires=("omega_m",), nonlinear=dict(sh0), positive=True, test_cols=(1,),
+        shapes=[Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5),
+                Shape("eps", *ctx.eps_range, log=True, n_grid=8)] if ctx.eps_range else
+               [Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5)],
+        # the curve decides: omega_s must be identified; the exponent trades off against omega_s on finite
+        # data (reported with its SD, or as a bound), the width is the baseline's, re-identified
+        nuisance=("eps", "delta"), replaces=("T_C",),
+        make_basis=stribeck_basis,
+    ))
     # Temperature-dependent friction: viscous and Coulomb coefficients drifting with T.
     tref = {"op": "offset", "var": "temperature", "ref": ctx.t_ref}
     out.append(Candidate(
@@ -235,13 +271,78 @@ def transmission_candidates(ctx: LibraryContext) -> list[Candidate]:
         Candidate("nonlinear_stiffness", "stiffness", "windup", None,
                   [{"op": "pow", "var": "windup", "p": 3.0}], "k3 w^3, w = theta_m/N - theta_f",
                   lambda c: {"k3": float(c[0])}, requires=("windup",)),
-        Candidate("hysteresis", "hysteresis", "windup", None,
-                  [{"op": "sgn", "var": "windup_dot", "eps": 0.0}], "T_h sgn(w'), w = theta_m/N - theta_f",
-                  lambda c: {"T_h": float(c[0])}, requires=("windup_dot",),
-                  # a hysteresis loop dissipates: the loop integral of Q_red dw = T_h * total |dw| > 0
-                  positive=True),
         Candidate("unknown", "bias", None, None, [{"op": "const"}], "c_0", lambda c: {"c_0": float(c[0])}),
     ]
+
+
+@register_candidate_builder
+def short_stroke_candidates(ctx: LibraryContext) -> list[Candidate]:
+    """A smooth, non-periodic term in an angle whose stroke is too short to identify a periodicity.
+
+    Powers 1..3 of (angle - centre) over the angle's range (a torque that depends on position, e.g. a
+    position-periodic torque seen over part of one period): reported ``unknown`` with ``variable`` set,
+    so such a structure is not taken by a constant bias.
+    """
+    out: list[Candidate] = []
+    for var, (centre, half) in ctx.short_stroke.items():
+        if var not in ctx.available or half <= 0:
+            continue
+        u = {"op": "offset", "var": var, "ref": centre}
+        # with the constant: the mean of such a torque over the stroke is part of it, not a separate bias
+        powers = [{"op": "const"}, u, {"op": "prod", "factors": [u, u]}, {"op": "prod", "factors": [u, u, u]}]
+        variants = [("plain", None, f"p0 + p1 u + p2 u^2 + p3 u^3, u = {var} - {centre:.4g}")]
+        if ctx.target == "tau_m" and "omega_m" in ctx.available:
+            variants.append(("sgn", _sgn(ctx), f"(p0 + p1 u + p2 u^2 + p3 u^3) sgn(omega_m), u = {var} - {centre:.4g}"))
+        for variant, times, form in variants:
+            basis = powers if times is None else [{"op": "prod", "factors": [b, dict(times)]} for b in powers]
+            out.append(Candidate(
+                "unknown", f"{var}:smooth", var, None, basis, form,
+                lambda c, h=half: {"p0": float(c[0]), "p1": float(c[1]), "p2": float(c[2]), "p3": float(c[3]),
+                                   "range_half_width": h},
+                requires=(var,) + (("omega_m",) if times else ()), short_stroke=True,
+            ))
+    return out
+
+
+@register_candidate_builder
+def twist_shape_candidates(ctx: LibraryContext) -> list[Candidate]:
+    """Twist-side effects with an identified shape: lost motion (dead zone of width j) and hysteresis."""
+    if ctx.target != "Q_red" or "windup" not in ctx.available or ctx.windup_scale <= 0:
+        return []
+    out = []
+    w_lo = max(ctx.windup_noise, 1e-4 * ctx.windup_scale, 1e-12)
+    w_hi = max(0.6 * ctx.windup_scale, 4 * w_lo)
+
+    def dz_basis_diff(sh):
+        # with the baseline's K w (and a cubic k3 w^3 if selected) these span K dz(w) + k3 dz(w)^3: the
+        # lost motion applied to the linear and the cubic law
+        d = {"op": "deadzone", "var": "windup", "width": float(sh["j"])}
+        return [{"op": "prod", "factors": [d]}, {"op": "prod", "factors": [d, d, d]}]
+
+    c = Candidate(
+        "backlash", "backlash", "windup", None, dz_basis_diff({"j": np.sqrt(w_lo * w_hi)}),
+        "K_j dz(w; j) + k3_j dz(w; j)^3, dz = sgn(w) max(|w| - j, 0), w = theta_m/N - theta_f",
+        lambda c: {"K_j": float(c[0]), "k3_j": float(c[1])}, requires=("windup",),
+        nonlinear={"j": float(np.sqrt(w_lo * w_hi))},
+        shapes=[Shape("j", w_lo, w_hi, log=True, n_grid=12)], make_basis=dz_basis_diff,
+    )
+    out.append(c)
+    if "windup_dot" in ctx.available and ctx.windup_dot_scale > 0:
+        v_lo = max(1e-4 * ctx.windup_dot_scale, 1e-12)
+        v_hi = 0.5 * ctx.windup_dot_scale
+
+        def hyst_basis(sh):
+            return [{"op": "sgn", "var": "windup_dot", "eps": float(sh["eps_h"])}]
+
+        out.append(Candidate(
+            "hysteresis", "hysteresis", "windup", None, hyst_basis({"eps_h": np.sqrt(v_lo * v_hi)}),
+            "T_h tanh(w'/eps_h), w = theta_m/N - theta_f",
+            lambda c: {"T_h": float(c[0])}, requires=("windup_dot",),
+            # a hysteresis loop dissipates: the loop integral of Q_red dw = T_h * total |dw| > 0
+            positive=True, nonlinear={"eps_h": float(np.sqrt(v_lo * v_hi))},
+            shapes=[Shape("eps_h", v_lo, v_hi, log=True, n_grid=10)], make_basis=hyst_basis,
+        ))
+    return out
 
 
 def catalog_orders(var: str) -> list[float]:

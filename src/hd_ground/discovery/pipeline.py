@@ -262,8 +262,11 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
                 params["T_C"] = rp["T_C"]
             if "b" in rp and rp["b"] >= 0:
                 params["b_visc"] = rp["b"]
+            if r.baseline_params.get("eps_omega", 0) > 0:
+                # the identified friction transition width (hd_twin.physics' regularised sign)
+                params["eps_omega"] = r.baseline_params["eps_omega"]
     cfg["params"] = params
-    cfg["discovery"] = {"recalibrated": [k for k in ("T_C", "b_visc") if k in params],
+    cfg["discovery"] = {"recalibrated": [k for k in ("T_C", "b_visc", "eps_omega") if k in params],
                         "baseline_refit": {r.signal: r.refit_baseline_params for r in results},
                         "network": "copied from the parent version, not retrained" if twin is not None else "none (physics-only model)"}
     if retrain and twin is not None and "train" in cfg:

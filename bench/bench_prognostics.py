@@ -1,0 +1,309 @@
+"""Benchmark: the life model fitted from operator records, leave-one-unit-out, per dataset.
+
+For every dataset and every held-out unit: fit the life model on the *other* units' health-indicator
+histories and events (failures / censoring) only, predict the held-out unit's RUL at every record, score it
+against its failure time (in-cone alpha = 0.2 for lambda >= 0.5, P5-P95 coverage, CRA, CRPS). In the same
+run: the UKF on the same fitted model, and today's reference model (simulated fleets: the particle filter
+calibrated on the training units' *wear truth* from /sim/health, an upper reference an operator cannot
+have; NASA / Virkler: the exponential-fade / Paris-law particle filters of ``realdata.py``).
+
+Datasets (each optional): simulated fleets (``--fleet NAME=DIR``, their ``fleet_truth.json`` gives the
+failure missions, written as an events file: what an operator records), NASA cells (``--nasa DIR``, failure =
+capacity <= 80 % of rated; 70 % leaves 1 failure in some training folds), Virkler (``--virkler DIR``).
+The degradation clock of the simulated fleets is chosen by maximum likelihood on the fleet named by
+``--dev`` (all its units) and then fixed for every other fleet: no choice is made on the scored units.
+
+    hdphm bench prognostics --extra --fleet dev=DIR --fleet scored=DIR --dev dev --nasa DIR --virkler DIR \
+        --out runs/bench_prognostics
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+KEYS = ("frac_in_cone_lambda_ge_0.5", "coverage_p5_p95", "cra", "crps_mean")
+
+
+def _score(hist, eol, samples=True):
+    from hd_prognostic import metrics as M
+
+    return M.score_history(hist.rul_t, hist.p50, hist.p5, hist.p95, float(eol), alpha=0.2,
+                           samples=hist.samples if samples and hist.samples else None)
+
+
+def _row(ms):
+    out = {}
+    for k in KEYS:
+        v = [m[k] for m in ms if k in m and m[k] is not None and np.isfinite(m[k])]
+        out[k] = float(np.mean(v)) if v else float("nan")
+    out["n"] = len(ms)
+    return out
+
+
+def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, label):
+    """Leave-one-unit-out: life model (grid posterior) and UKF on it; units with a failure are scored."""
+    from hd_prognostic.lifemodel import LifeModel, UnitEvents, predict_history
+
+    per_grid, per_ukf, hists = [], [], {}
+    for i, u in enumerate(units):
+        if u.events.failure is None:
+            continue
+        t0 = time.perf_counter()
+        train = [v for j, v in enumerate(units) if j != i]
+        m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit)
+        test = _copy_unit(u)
+        test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
+        hg = predict_history(m, test, n_samples=samples, seed=seed)
+        hu = predict_history(m, test, n_samples=samples, seed=seed, method="ukf")
+        sg, su = _score(hg, eols[u.unit]), _score(hu, eols[u.unit])
+        sg["unit"] = su["unit"] = u.unit
+        per_grid.append(sg)
+        per_ukf.append(su)
+        hists[u.unit] = hg
+        if progress:
+            print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
+                  f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
+                  f" / {su['coverage_p5_p95']:.2f}  [{time.perf_counter() - t0:.1f} s]", flush=True)
+    return per_grid, per_ukf, hists
+
+
+def _copy_unit(u):
+    from hd_prognostic.lifemodel import UnitHistory
+
+    return UnitHistory(u.unit, u.t.copy(), u.y.copy(), u.E.copy(), u.discrete, u.E_next, u.hours_per_step,
+                       u.events, list(u.notes))
+
+
+def sim_fleet(name, fleet_dir, out, exposure, args):
+    """Events from fleet_truth.json (failure missions), histories from contract topics, LOUO; the
+    wear-truth-calibrated PF as the upper reference."""
+    from hd_prognostic.evaluate import load_fleet
+    from hd_prognostic.hd import fit_population, prognose, unit_history
+    from hd_prognostic.lifemodel import UnitEvents, attach_events, write_events
+
+    truth = json.loads((Path(fleet_dir) / "fleet_truth.json").read_text())
+    ev = {a["actuator_id"]: UnitEvents(failure=float(a["eol_mission"])) for a in truth["actuators"]
+          if a.get("eol_mission") is not None}
+    write_events(out / f"{name}_events.csv", ev)
+    fleet = load_fleet(fleet_dir, cache_dir=out / "cache" / name, progress=False, workers=args.workers)
+    res = {}
+    if exposure is None:
+        from hd_prognostic.lifemodel import fit_best
+
+        cands = {}
+        for e in ("missions", "hours", "load"):
+            us = [unit_history(a, args.feature, e) for a in fleet]
+            attach_events(us, ev)
+            cands[e] = us
+        best = fit_best(cands, feature=args.feature)
+        exposure = best.exposure
+        res["exposure_choice"] = best.fit_info["exposure_candidates"]
+        print(f"{name}: exposure by maximum likelihood on all of {name}: {exposure} "
+              f"({json.dumps(best.fit_info['exposure_candidates'], default=float)})", flush=True)
+    units = [unit_history(a, args.feature, exposure) for a in fleet]
+    attach_events(units, ev)
+    eols = {k: v.failure for k, v in ev.items()}
+    g, u, _ = _louo(units, eols, exposure, "mission", args.feature, args.samples, args.seed, True, name)
+    res.update({"exposure": exposure, "life": g, "ukf": u})
+    ref = []
+    if not args.no_reference:
+        for a in fleet:
+            if a.actuator_id not in eols:
+                continue
+            train = [b for b in fleet if b.actuator_id != a.actuator_id]
+            obs = fit_population(train)
+            h = prognose(a, obs, n_particles=args.particles, seed=args.seed)
+            s = _score(h, a.eol_mission())
+            s["unit"] = a.actuator_id
+            ref.append(s)
+    res["reference"] = ref
+    res["reference_name"] = "wear-truth-calibrated PF (fit_population on /sim/health of the training units)"
+    res["bound"] = threshold_bound(truth, eols)
+    return res, exposure
+
+
+def threshold_bound(truth, eols):
+    """In-cone fraction (alpha 0.2, lambda >= 0.5) of a forecast that knows each unit's *true* future wear path
+    and only the population's failure wear (median h_fail of the other units): what a population-level
+    threshold allows at best (scoring code: reads the simulator's truth)."""
+    from hd_prognostic import metrics as M
+
+    acts = [a for a in truth["actuators"] if a["actuator_id"] in eols]
+    hf = {a["actuator_id"]: float(a["params"]["h_fail"]) for a in acts}
+    out = {}
+    for a in acts:
+        aid = a["actuator_id"]
+        pop = float(np.median([v for k, v in hf.items() if k != aid]))
+        h = np.array([m["h"] for m in a["missions"]], float)
+        mi = np.array([m["mission_index"] for m in a["missions"]], float)
+        i = np.flatnonzero(h >= pop)
+        if len(i):
+            tf = mi[i[0]]
+        else:  # extrapolate the last 10 missions' wear rate
+            r = max((h[-1] - h[-11]) / 10.0, 1e-30) if len(h) > 11 else max(h[-1] / max(mi[-1], 1), 1e-30)
+            tf = mi[-1] + np.ceil((pop - h[-1]) / r)
+        eol = eols[aid]
+        t = mi[mi < eol]
+        p = tf - t
+        out[aid] = M.score_history(t, p, p, p, eol)["frac_in_cone_lambda_ge_0.5"]
+    return out
+
+
+def events_fleet(name, fleet_dir, exposure, args):
+    """A fleet of bags with the operator's own ``events.csv`` (e.g. the independent plant's fleet: failures
+    and inspections); scored against the failures in that file. No wear-truth reference (no /sim topics)."""
+    from hd_prognostic.hd import load_fleet_histories, unit_history
+    from hd_prognostic.lifemodel import attach_events, read_events
+
+    ev = read_events(Path(fleet_dir) / "events.csv")
+    acts, _ = load_fleet_histories(fleet_dir, args.feature, "missions", cache_dir=Path(args.out) / "cache" / name,
+                                   workers=args.workers)
+    units = [unit_history(a, args.feature, exposure) for a in acts]
+    attach_events(units, ev)
+    eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
+    g, u, _ = _louo(units, eols, exposure, "mission", args.feature, args.samples, args.seed, True, name)
+    return {"exposure": exposure, "life": g, "ukf": u, "reference": [],
+            "reference_name": "- (no wear truth in these bags)"}
+
+
+def csv_dataset(name, hi, events, args):
+    from hd_prognostic.lifemodel import attach_events, read_events, read_hi_csv
+
+    units = read_hi_csv(hi)
+    ev = read_events(events)
+    attach_events(units, ev, str(events))
+    eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
+    g, u, _ = _louo(units, eols, "csv exposure", "step", "hi", args.samples, args.seed, True, name)
+    return {"exposure": "time column", "life": g, "ukf": u}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="hdphm bench prognostics", description=__doc__.split("\n")[0])
+    ap.add_argument("--fleet", action="append", default=[], metavar="NAME=DIR", help="simulated fleet (repeatable)")
+    ap.add_argument("--events-fleet", action="append", default=[], metavar="NAME=DIR",
+                    help="fleet of bags with its own DIR/events.csv (e.g. the independent plant), repeatable")
+    ap.add_argument("--dev", default=None, help="fleet NAME on which the degradation clock is chosen (ML)")
+    ap.add_argument("--exposure", default=None, choices=("missions", "hours", "load"),
+                    help="fix the clock instead of choosing it on --dev")
+    ap.add_argument("--nasa", default=None, help="folder with B0005.csv ... (NASA cells)")
+    ap.add_argument("--virkler", default=None, help="folder with the Virkler CSV files")
+    ap.add_argument("--virkler-every", type=int, default=1, help="score every k-th specimen (all are used to fit)")
+    ap.add_argument("--out", default="runs/bench_prognostics")
+    ap.add_argument("--feature", default="HF_MTW_IF")
+    ap.add_argument("--samples", type=int, default=1000)
+    ap.add_argument("--particles", type=int, default=1000, help="reference PF particles")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--no-reference", action="store_true")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t_all = time.perf_counter()
+    results = {}
+    fleets = dict(f.split("=", 1) for f in args.fleet)
+    exposure = args.exposure
+    order = ([args.dev] if args.dev in fleets else []) + [n for n in fleets if n != args.dev]
+    if exposure is None and args.dev not in fleets and fleets:
+        print("error: give --dev NAME (one of the --fleet names) or --exposure", file=sys.stderr)
+        return 2
+    for n in order:
+        t0 = time.perf_counter()
+        results[n], exposure = sim_fleet(n, fleets[n], out, exposure, args)
+        results[n]["seconds"] = time.perf_counter() - t0
+    for spec in args.events_fleet:
+        n, d = spec.split("=", 1)
+        t0 = time.perf_counter()
+        results[n] = events_fleet(n, d, exposure or "load", args)
+        results[n]["seconds"] = time.perf_counter() - t0
+    if args.nasa:
+        from hd_prognostic.realdata import battery_records, run_battery
+
+        t0 = time.perf_counter()
+        hi, ev = battery_records(args.nasa, out, eol_frac=0.8)
+        results["nasa"] = csv_dataset("nasa", hi, ev, args)
+        r = run_battery(args.nasa, eol_fracs=(0.8,), n_particles=args.particles, seed=args.seed)
+        results["nasa"]["reference"] = [dict(u["metrics"], unit=k) for k, u in r["units"].items()]
+        results["nasa"]["reference_name"] = "exponential-fade PF, leave-one-cell-out prior (realdata.run_battery)"
+        results["nasa"]["seconds"] = time.perf_counter() - t0
+    if args.virkler:
+        from hd_prognostic.realdata import run_virkler, virkler_records
+
+        t0 = time.perf_counter()
+        hi, ev = virkler_records(args.virkler, out)
+        res = csv_dataset_every("virkler", hi, ev, args)
+        r = run_virkler(args.virkler, n_particles=args.particles, seed=args.seed)
+        scored = {m["unit"] for m in res["life"]}  # the same specimens as the life model's rows
+        res["reference"] = [dict(u["metrics"], unit=f"specimen{k}") for k, u in r["units"].items()
+                            if f"specimen{k}" in scored]
+        res["reference_name"] = "Paris-law PF, 2-fold over specimens (realdata.run_virkler), same specimens"
+        res["seconds"] = time.perf_counter() - t0
+        results["virkler"] = res
+    table = {}
+    for n, r in results.items():
+        table[n] = {"life model": _row(r["life"]), "UKF on it": _row(r["ukf"]),
+                    "threshold bound": float(np.mean(list(r["bound"].values()))) if r.get("bound") else None,
+                    "reference": _row(r.get("reference", [])), "exposure": r.get("exposure"),
+                    "reference_name": r.get("reference_name"), "seconds": r.get("seconds")}
+    (out / "bench_prognostics.json").write_text(json.dumps({"table": table, "results": results}, indent=1,
+                                                           default=lambda o: float(o) if np.isscalar(o) else str(o)))
+    print()
+    print("| dataset | units scored | clock | life model: in-cone / P5-P95 cov / CRA / CRPS | UKF on it | "
+          "reference | reference model | in-cone bound (true wear, population threshold) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for n, t in table.items():
+        f = lambda r: (f"{r['frac_in_cone_lambda_ge_0.5']:.2f} / {r['coverage_p5_p95']:.2f} / {r['cra']:.2f} / "
+                       f"{r['crps_mean']:.3g}" if r["n"] else "-")
+        print(f"| {n} | {t['life model']['n']} | {t['exposure']} | {f(t['life model'])} | {f(t['UKF on it'])} | "
+              f"{f(t['reference'])} | {t['reference_name'] or '-'} | "
+              f"{'-' if t['threshold bound'] is None else format(t['threshold bound'], '.2f')} |")
+    print(f"\nwrote {out}/bench_prognostics.json; {time.perf_counter() - t_all:.0f} s in all")
+    return 0
+
+
+def csv_dataset_every(name, hi, events, args):
+    """csv_dataset, scoring every k-th unit (``--virkler-every``) while each fit uses all the others."""
+    from hd_prognostic.lifemodel import attach_events, read_events, read_hi_csv
+
+    units = read_hi_csv(hi)
+    ev = read_events(events)
+    attach_events(units, ev, str(events))
+    eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
+    k = max(1, args.virkler_every)
+    scored = {u.unit for u in units[::k]}
+    keep = {u: t for u, t in eols.items() if u in scored}
+    g, u, _ = _louo_subset(units, keep, args, name)
+    return {"exposure": "time column", "life": g, "ukf": u, "scored_every": k}
+
+
+def _louo_subset(units, eols, args, name):
+    from hd_prognostic.lifemodel import LifeModel, UnitEvents, predict_history
+
+    per_grid, per_ukf = [], []
+    for i, u in enumerate(units):
+        if u.unit not in eols:
+            continue
+        t0 = time.perf_counter()
+        m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
+                          time_unit="step")
+        test = _copy_unit(u)
+        test.events = UnitEvents()
+        hg = predict_history(m, test, n_samples=args.samples, seed=args.seed)
+        hu = predict_history(m, test, n_samples=args.samples, seed=args.seed, method="ukf")
+        sg, su = _score(hg, eols[u.unit]), _score(hu, eols[u.unit])
+        sg["unit"] = su["unit"] = u.unit
+        per_grid.append(sg)
+        per_ukf.append(su)
+        print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
+              f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
+              f"{su['coverage_p5_p95']:.2f}  [{time.perf_counter() - t0:.1f} s]", flush=True)
+    return per_grid, per_ukf, None
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,805 @@
+"""A fleet life model fitted from what an operator records: health-indicator histories and events.
+
+Inputs per unit (no simulator truth anywhere):
+
+* a health-indicator (HI) history ``(t_j, y_j)`` (onboard feature per mission, or any CSV series) and the
+  cumulative exposure ``E(t)`` (missions, operating hours, or the load-based Archard exposure summed from
+  the bags);
+* events (:func:`read_events`): ``failure`` at ``t_f`` (found failed at the start of ``t_f``: it ran up to
+  its previous record), ``removal`` at ``t_c`` (healthy when removed: right-censored), ``inspection``
+  (``quantity`` = ``value`` measured at ``t``). A unit without a failure or removal row is censored at its
+  last record.
+
+Model (latent degradation path, population of units):
+
+* latent degradation ``L_i(E) = r_i (E / E_ref)^b``, per-unit rate ``ln r_i ~ N(mu, s^2)``, shared shape
+  exponent ``b`` (fitted: the law's shape comes from the data);
+* HI: ``y_ij = a_i + c L_i(E_ij) + e_ij``, per-unit offset ``a_i ~ N(a0, s_a^2)`` (marginalised
+  analytically), AR(1) residuals ``e_ij = rho e_i(j-1) + N(0, sigma^2)`` (prewhitened; rho fitted);
+* failure when ``L_i`` crosses the unit's threshold ``D_i``, ``ln D_i ~ N(0, s_D^2)`` (median threshold 1
+  fixes the latent scale; ``c`` is the HI change at the median threshold);
+* inspection of quantity q: ``v = alpha_q + beta_q L_i + N(0, tau_q^2)`` (population-level map, fitted
+  when the quantity has >= 4 inspections in the fleet; otherwise ignored with a note).
+
+Likelihood of unit i (exact up to a 1-D quadrature over ``z = ln r_i``, on an adaptive grid):
+``p_i = int N(z; mu, s) p(y_i | z) prod_insp p(v | z) P(event | z) dz`` with
+``P(failure in (E_lo, E_hi] | z) = Phi((z + b ln E_hi)/s_D) - Phi((z + b ln E_lo)/s_D)`` (interval censored:
+it failed between its last record and the mission it was found failed at) and
+``P(survive to E_c | z) = Phi(-(z + b ln E_c)/s_D)``. All parameters by maximum likelihood (L-BFGS-B, then a
+short Nelder-Mead polish, on the summed log marginal likelihood, started from per-unit least squares).
+
+Prognosis of one unit at time t_k: the posterior over z on the same grid (its HI and inspections up to t_k,
+survival to ``E(t_k)``), then ``ln D`` from its prior truncated to ``ln D > z + b ln E(t_k)``, the failure
+exposure ``E_f = E_ref (D / r)^(1/b)`` and the failure time from the unit's own exposure rate.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import optimize, special, stats
+
+EVENT_KINDS = ("failure", "removal", "inspection")
+EVENT_COLUMNS = ("actuator_id", "mission_index", "event", "quantity", "value")
+EXPOSURES = ("missions", "hours", "load")
+MIN_INSPECTIONS = 4  # per quantity, fleet-wide, to fit its (alpha, beta, tau) map
+_LOG2PI = math.log(2 * math.pi)
+
+
+# ---------------------------------------------------------------------------------------------- events ---
+@dataclass
+class UnitEvents:
+    failure: float | None = None
+    removal: float | None = None
+    inspections: list[tuple[float, str, float]] = field(default_factory=list)  # (t, quantity, value SI)
+
+
+def read_events(path: str | Path) -> dict[str, UnitEvents]:
+    """Parse an events CSV (columns :data:`EVENT_COLUMNS`); every error names the file and row."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: events file not found")
+    out: dict[str, UnitEvents] = {}
+    with open(p, newline="") as f:
+        rd = csv.reader(f)
+        try:
+            head = [h.strip() for h in next(rd)]
+        except StopIteration:
+            raise ValueError(f"{p}: empty events file (expected header {','.join(EVENT_COLUMNS)})") from None
+        miss = [c for c in EVENT_COLUMNS[:3] if c not in head]
+        if miss:
+            raise ValueError(f"{p}: row 1 (header): missing column(s) {miss}; expected {','.join(EVENT_COLUMNS)}")
+        ix = {c: head.index(c) for c in EVENT_COLUMNS if c in head}
+        for n, row in enumerate(rd, start=2):
+            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
+                continue
+            where = f"{p}: row {n}"
+            if len(row) < len(head):
+                row = row + [""] * (len(head) - len(row))
+            unit = row[ix["actuator_id"]].strip()
+            kind = row[ix["event"]].strip().lower()
+            if not unit:
+                raise ValueError(f"{where}: empty actuator_id")
+            if kind not in EVENT_KINDS:
+                raise ValueError(f"{where}: event {row[ix['event']]!r} is not one of {', '.join(EVENT_KINDS)}")
+            try:
+                t = float(row[ix["mission_index"]])
+            except ValueError:
+                raise ValueError(f"{where}: mission_index {row[ix['mission_index']]!r} is not a number") from None
+            if not math.isfinite(t) or t < 0:
+                raise ValueError(f"{where}: mission_index {t} must be finite and >= 0")
+            ev = out.setdefault(unit, UnitEvents())
+            if kind == "inspection":
+                q = row[ix["quantity"]].strip() if "quantity" in ix else ""
+                if not q:
+                    raise ValueError(f"{where}: inspection without a quantity")
+                try:
+                    v = float(row[ix["value"]]) if "value" in ix else float("nan")
+                except ValueError:
+                    raise ValueError(f"{where}: inspection value {row[ix['value']]!r} is not a number") from None
+                if not math.isfinite(v):
+                    raise ValueError(f"{where}: inspection value must be a finite number (SI units)")
+                ev.inspections.append((t, q, v))
+            else:
+                if ev.failure is not None or ev.removal is not None:
+                    raise ValueError(f"{where}: {unit} already has a failure/removal row (one end of life per unit)")
+                if kind == "failure":
+                    ev.failure = t
+                else:
+                    ev.removal = t
+    return out
+
+
+def write_events(path: str | Path, events: dict[str, UnitEvents]) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(EVENT_COLUMNS)
+        for u in sorted(events):
+            e = events[u]
+            for t, q, v in e.inspections:
+                w.writerow([u, _num(t), "inspection", q, repr(float(v))])
+            if e.failure is not None:
+                w.writerow([u, _num(e.failure), "failure", "", ""])
+            if e.removal is not None:
+                w.writerow([u, _num(e.removal), "removal", "", ""])
+
+
+def _num(t: float) -> str:
+    return str(int(t)) if float(t).is_integer() else repr(float(t))
+
+
+# ------------------------------------------------------------------------------------------ unit data ---
+@dataclass
+class UnitHistory:
+    """One unit's HI history and exposure. ``E`` is the cumulative exposure at the record times ``t``;
+    ``t_next``/``E_next`` the exposure at the step after the last record when known (bags: + that mission's
+    own exposure); ``discrete`` when time counts whole steps (missions, cycles)."""
+
+    unit: str
+    t: np.ndarray
+    y: np.ndarray
+    E: np.ndarray
+    discrete: bool = True
+    E_next: float | None = None
+    hours_per_step: float | None = None
+    events: UnitEvents = field(default_factory=UnitEvents)
+    notes: list[str] = field(default_factory=list)
+
+    def rate(self) -> float:
+        """Median exposure per time unit over the record (for extrapolation)."""
+        dt, dE = np.diff(self.t), np.diff(self.E)
+        ok = (dt > 0) & np.isfinite(dE) & (dE >= 0)
+        if ok.any():
+            return float(np.median(dE[ok] / dt[ok]))
+        if self.E_next is not None and len(self.t):
+            return float(self.E_next - self.E[-1])
+        return float("nan")
+
+    def exposure_at(self, t: float, rate: float | None = None) -> float:
+        """Cumulative exposure at time ``t`` (interpolated; beyond the record: next-step value, then rate)."""
+        if t <= self.t[-1]:
+            return float(np.interp(t, self.t, self.E))
+        r = self.rate() if rate is None else rate
+        if self.E_next is not None and self.discrete:
+            return float(self.E_next + (t - self.t[-1] - 1) * r)
+        return float(self.E[-1] + (t - self.t[-1]) * r)
+
+    def truncated(self, t_k: float) -> "UnitHistory":
+        """The record up to and including ``t_k`` (what is known at that time)."""
+        m = self.t <= t_k
+        if m.all():
+            E_next = self.E_next
+        else:  # the exposure up to the next step is known once the step at t_k is flown
+            E_next = float(self.exposure_at(self.t[m][-1] + 1)) if self.discrete else None
+        ev = UnitEvents(inspections=[x for x in self.events.inspections if x[0] <= t_k])
+        return UnitHistory(self.unit, self.t[m], self.y[m], self.E[m], self.discrete, E_next,
+                           self.hours_per_step, ev)
+
+
+def attach_events(units: list[UnitHistory], events: dict[str, UnitEvents], source: str = "events") -> list[str]:
+    """Give each unit its events; drop HI records at or after a failure; return notes (unknown ids...)."""
+    notes = []
+    ids = {u.unit for u in units}
+    extra = sorted(set(events) - ids)
+    if extra:
+        notes.append(f"{source}: {len(extra)} unit(s) with events but no health-indicator history ignored: "
+                     f"{', '.join(extra[:5])}")
+    for u in units:
+        ev = events.get(u.unit, UnitEvents())
+        u.events = ev
+        if ev.failure is not None:
+            if not (u.t < ev.failure).any():
+                raise ValueError(f"{source}: {u.unit}: failure at {ev.failure:g} is not after its first record "
+                                 f"({u.t[0]:g})")
+            late = u.t >= ev.failure
+            if late.any():
+                notes.append(f"{u.unit}: {int(late.sum())} record(s) at or after the failure at {ev.failure:g} not used")
+                keep = u.t[~late]
+                if u.discrete:
+                    u.E_next = float(u.exposure_at(keep[-1] + 1))
+                u.t, u.y, u.E = keep, u.y[~late], u.E[~late]
+    return notes
+
+
+def read_hi_csv(path: str | Path) -> list[UnitHistory]:
+    """``unit,time,hi[,exposure]`` rows (exposure cumulative; default = time). Errors name file and row."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: health-indicator CSV not found")
+    rows: dict[str, list[tuple[float, float, float]]] = {}
+    with open(p, newline="") as f:
+        rd = csv.reader(f)
+        try:
+            head = [h.strip() for h in next(rd)]
+        except StopIteration:
+            raise ValueError(f"{p}: empty file (expected header unit,time,hi[,exposure])") from None
+        for c in ("unit", "time", "hi"):
+            if c not in head:
+                raise ValueError(f"{p}: row 1 (header): missing column {c!r}; expected unit,time,hi[,exposure]")
+        iu, it, ih = head.index("unit"), head.index("time"), head.index("hi")
+        ie = head.index("exposure") if "exposure" in head else None
+        for n, r in enumerate(rd, start=2):
+            if not r or all(not c.strip() for c in r):
+                continue
+            try:
+                t, y = float(r[it]), float(r[ih]) if r[ih].strip() else float("nan")
+                e = float(r[ie]) if ie is not None else t
+            except (ValueError, IndexError):
+                raise ValueError(f"{p}: row {n}: time/hi/exposure not numbers: {r!r}") from None
+            if not math.isfinite(t) or not math.isfinite(e):
+                raise ValueError(f"{p}: row {n}: time and exposure must be finite")
+            rows.setdefault(r[iu].strip(), []).append((t, y, e))
+    if not rows:
+        raise ValueError(f"{p}: no data rows")
+    out = []
+    for u, rr in rows.items():
+        a = np.array(sorted(rr))
+        if np.any(np.diff(a[:, 0]) == 0):
+            raise ValueError(f"{p}: unit {u}: repeated time values")
+        if np.any(np.diff(a[:, 2]) < 0):
+            raise ValueError(f"{p}: unit {u}: exposure decreases with time (it must be cumulative)")
+        t = a[:, 0]
+        disc = bool(np.all(np.mod(t, 1) == 0) and len(t) > 1 and np.median(np.diff(t)) == 1)
+        out.append(UnitHistory(u, t, a[:, 1], a[:, 2], discrete=disc))
+    return out
+
+
+def write_hi_csv(path: str | Path, units: list[UnitHistory]) -> None:
+    with open(path, "w") as f:
+        f.write("unit,time,hi,exposure\n")
+        for u in units:
+            for t, y, e in zip(u.t, u.y, u.E):
+                f.write(f"{u.unit},{_num(t)},{float(y)!r},{float(e)!r}\n")
+
+
+# ------------------------------------------------------------------------------------------- the model ---
+def _log_diff_ndtr(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """log(Phi(hi) - Phi(lo)) for hi > lo, stable in both tails."""
+    lo, hi = np.broadcast_arrays(np.asarray(lo, float), np.asarray(hi, float))
+    out = np.empty(lo.shape)
+    up = lo > 0  # both in the upper tail: use the survival functions
+    a, b = special.log_ndtr(-lo[up]), special.log_ndtr(-hi[up])
+    out[up] = a + np.log1p(-np.exp(np.minimum(b - a, 0.0)) + 1e-300)
+    a, b = special.log_ndtr(hi[~up]), special.log_ndtr(lo[~up])
+    out[~up] = a + np.log1p(-np.exp(np.minimum(b - a, 0.0)) + 1e-300)
+    return out
+
+
+def _lse(f: np.ndarray) -> np.ndarray:
+    """log-sum-exp over the last axis (rows of -inf give -inf)."""
+    m = np.max(f, axis=-1)
+    mm = np.where(np.isfinite(m), m, 0.0)
+    with np.errstate(divide="ignore"):
+        return mm + np.log(np.sum(np.exp(f - mm[..., None]), axis=-1))
+
+
+class _Batch:
+    """Units' data in flat arrays (normalised log exposure), so the integrand is evaluated for every unit
+    at once on a (units x grid) array; only the shape exponent b changes the sufficient statistics."""
+
+    def __init__(self, units: list[UnitHistory], E_ref: float, censor_at: list | None = None,
+                 quantities: list[str] | None = None):
+        self.U = len(units)
+        idx, ys, lx, link = [], [], [], []
+        self.llo, self.lhi, self.lcens = (np.full(self.U, np.nan) for _ in range(3))
+        qi, qu, qx, qv = [], [], [], []
+        qs = {q: j for j, q in enumerate(quantities or [])}
+        for i, u in enumerate(units):
+            ok = np.isfinite(u.y)
+            idx.append(np.full(int(ok.sum()), i))
+            ys.append(u.y[ok])
+            # AR(1) residual chain: a record continues the chain when the record before it is finite
+            prev_ok = np.concatenate([[False], ok[:-1]])
+            link.append(prev_ok[ok])
+            with np.errstate(divide="ignore"):
+                lx.append(np.log(np.maximum(u.E[ok], 0.0) / E_ref))
+            for t, q, v in u.events.inspections:
+                if q in qs:
+                    qi.append(qs[q])
+                    qu.append(i)
+                    with np.errstate(divide="ignore"):
+                        qx.append(math.log(max(u.exposure_at(t), 0.0) / E_ref) if u.exposure_at(t) > 0 else -np.inf)
+                    qv.append(v)
+            ev = u.events
+            tc = None if censor_at is None else censor_at[i]
+            if tc is None and ev.failure is not None:
+                prev = u.t[u.t < ev.failure]
+                lo = u.exposure_at(float(prev[-1])) / E_ref if len(prev) else 0.0
+                hi = max(u.exposure_at(ev.failure) / E_ref, lo * (1 + 1e-9) + 1e-12)
+                self.llo[i] = math.log(lo) if lo > 0 else -np.inf
+                self.lhi[i] = math.log(hi)
+            else:
+                if tc is None:
+                    tc = ev.removal if ev.removal is not None else u.t[-1]
+                ec = u.exposure_at(tc) / E_ref
+                self.lcens[i] = math.log(ec) if ec > 0 else -np.inf
+        self.idx = np.concatenate(idx).astype(int)
+        self.y = np.concatenate(ys)
+        self.lx = np.concatenate(lx)
+        self.link = np.concatenate(link).astype(bool)
+        self.n = np.bincount(self.idx, minlength=self.U).astype(float)
+        self.n_start = np.bincount(self.idx, (~self.link).astype(float), self.U)  # chain starts per unit
+        self.qi, self.qu = np.array(qi, int), np.array(qu, int)
+        self.qx, self.qv = np.array(qx, float), np.array(qv, float)
+        self.quantities = list(quantities or [])
+        self._b = None
+
+    def set_b(self, b: float, rho: float = 0.0) -> None:
+        """Sufficient statistics of the prewhitened series (AR(1) residuals with coefficient rho):
+        u_j = y_j - rho y_{j-1}, offset regressor g_j = 1 - rho, latent regressor X_j - rho X_{j-1}; at a
+        chain start sqrt(1 - rho^2) times y_j, 1, X_j."""
+        if (b, rho) == self._b:
+            return
+        X = np.exp(b * self.lx)
+        k0 = math.sqrt(1.0 - rho * rho)
+        L = self.link
+        yp = np.concatenate([[0.0], self.y[:-1]])
+        Xp = np.concatenate([[0.0], X[:-1]])
+        u = np.where(L, self.y - rho * yp, k0 * self.y)
+        xt = np.where(L, X - rho * Xp, k0 * X)
+        g = np.where(L, 1.0 - rho, k0)
+        bc = lambda w: np.bincount(self.idx, w, self.U)  # noqa: E731
+        self.Sgg, self.Sgu, self.SgX = bc(g * g), bc(g * u), bc(g * xt)
+        self.Suu, self.SuX, self.SXX = bc(u * u), bc(u * xt), bc(xt * xt)
+        self.qX = np.exp(b * self.qx)
+        self.rho = rho
+        self._b = (b, rho)
+
+    def logf(self, z: np.ndarray, th: dict, b: float, insp: dict) -> np.ndarray:
+        """log of prior(z) p(y|z) p(insp|z) P(event|z), z of shape (U, n)."""
+        rho = math.tanh(th.get("atanh_rho", 0.0))
+        self.set_b(b, rho)
+        s, sa, sig, sD = (math.exp(th[k]) for k in ("log_s", "log_sa", "log_sigma", "log_sD"))
+        mu, c, a0 = th["mu"], th["c"], th["a0"]
+        r = np.exp(z)
+        f = -0.5 * ((z - mu) / s) ** 2 - math.log(s) - 0.5 * _LOG2PI
+        n = self.n[:, None]
+        # residual e = u - a0 g - c r x~ of the prewhitened series; offset a - a0 ~ N(0, s_a^2) marginalised
+        Sge = (self.Sgu - a0 * self.Sgg)[:, None] - c * r * self.SgX[:, None]
+        Sw = (self.Suu - 2 * a0 * self.Sgu + a0 * a0 * self.Sgg)[:, None]
+        Swx = (self.SuX - a0 * self.SgX)[:, None]
+        See = Sw - 2 * c * r * Swx + c * c * r * r * self.SXX[:, None]
+        v2 = sig * sig
+        Sgg = self.Sgg[:, None]
+        f = f - 0.5 * n * (_LOG2PI + math.log(v2)) - 0.5 * np.log1p(Sgg * sa * sa / v2) \
+            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge) \
+            + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho)  # Jacobian of the chain starts
+        for j, q in enumerate(self.quantities):
+            m = insp.get(q)
+            sel = self.qi == j
+            if m is None or not sel.any():
+                continue
+            tau = math.exp(m["log_tau"])
+            rows = self.qu[sel]
+            term = -0.5 * ((self.qv[sel, None] - m["alpha"] - m["beta"] * r[rows] * self.qX[sel, None]) / tau) ** 2 \
+                - math.log(tau) - 0.5 * _LOG2PI
+            np.add.at(f, rows, term)
+        fl = np.isfinite(self.lhi)
+        if fl.any():
+            f[fl] += _log_diff_ndtr((z[fl] + b * self.llo[fl, None]) / sD, (z[fl] + b * self.lhi[fl, None]) / sD)
+        ce = np.isfinite(self.lcens)
+        if ce.any():
+            f[ce] += special.log_ndtr(-(z[ce] + b * self.lcens[ce, None]) / sD)
+        return f
+
+    def grid(self, th: dict, b: float, insp: dict, n: int = 161, windows: np.ndarray | None = None):
+        """Per-unit adaptive grids holding the integrand's mass: (z, log f, dz), shapes (U, n), (U, n), (U,).
+
+        ``windows`` (U x 2, updated in place; NaN = none) starts from a previous call's ranges."""
+        s = math.exp(th["log_s"])
+        wlo, whi = th["mu"] - 9 * s - 1.0, th["mu"] + 9 * s + 1.0
+        lo, hi = np.full(self.U, wlo), np.full(self.U, whi)
+        if windows is not None:
+            ok = np.isfinite(windows[:, 0])
+            w = 0.5 * (windows[ok, 1] - windows[ok, 0])
+            lo[ok], hi[ok] = windows[ok, 0] - w, windows[ok, 1] + w
+        todo = np.ones(self.U, bool)
+        lin = np.linspace(0.0, 1.0, n)
+        Z = np.zeros((self.U, n))
+        F = np.zeros((self.U, n))
+        ar = np.arange(n)
+        for _ in range(10):
+            rows = np.flatnonzero(todo)
+            if not len(rows):
+                break
+            z = lo[rows, None] + (hi - lo)[rows, None] * lin
+            sub = _SubBatch(self, rows)
+            f = sub.logf(z, th, b, insp)
+            f = np.where(np.isfinite(f), f, -np.inf)
+            Z[rows], F[rows] = z, f
+            mx = f.max(1)
+            keep = f > (mx - 40.0)[:, None]
+            first = np.argmax(keep, 1)
+            last = n - 1 - np.argmax(keep[:, ::-1], 1)
+            edge = ((first == 0) & (lo[rows] > wlo)) | ((last == n - 1) & (hi[rows] < whi))
+            narrow = (last - first + 2 < 40) & ~edge
+            i0, i1 = np.maximum(first - 1, 0), np.minimum(last + 1, n - 1)
+            zr = z[ar[None, :] == i0[:, None]], z[ar[None, :] == i1[:, None]]
+            if windows is not None:
+                windows[rows, 0], windows[rows, 1] = zr
+            r_e, r_n = rows[edge], rows[narrow]
+            lo[r_e], hi[r_e] = np.minimum(lo[r_e], wlo), np.maximum(hi[r_e], whi)
+            lo[r_n], hi[r_n] = zr[0][narrow], zr[1][narrow]
+            todo[:] = False
+            todo[r_e] = True
+            todo[r_n] = True
+            todo[rows[~np.isfinite(mx)]] = False
+        return Z, F, Z[:, 1] - Z[:, 0]
+
+
+class _SubBatch(_Batch):
+    """A view of some rows of a batch (same arrays, selected units)."""
+
+    def __init__(self, base: _Batch, rows: np.ndarray):  # noqa: D401 - light view, no parent __init__
+        self.U = len(rows)
+        self.n, self.n_start = base.n[rows], base.n_start[rows]
+        self._base, self._rows = base, rows
+        self.llo, self.lhi, self.lcens = base.llo[rows], base.lhi[rows], base.lcens[rows]
+        self.quantities = base.quantities
+        pos = np.full(base.U, -1)
+        pos[rows] = np.arange(len(rows))
+        m = pos[base.qu] >= 0 if len(base.qu) else np.zeros(0, bool)
+        self.qi, self.qu, self.qx, self.qv = base.qi[m], pos[base.qu[m]], base.qx[m], base.qv[m]
+        self._b = None
+
+    def set_b(self, b: float, rho: float = 0.0) -> None:
+        B = self._base
+        B.set_b(b, rho)
+        r = self._rows
+        self.Sgg, self.Sgu, self.SgX = B.Sgg[r], B.Sgu[r], B.SgX[r]
+        self.Suu, self.SuX, self.SXX = B.Suu[r], B.SuX[r], B.SXX[r]
+        self.qX = np.exp(b * self.qx)
+
+
+class LifeModel:
+    """Fitted population parameters + the prognosis on one unit (see the module docstring)."""
+
+    PARAMS = ("mu", "log_s", "log_b", "c", "a0", "log_sa", "log_sigma", "log_sD", "atanh_rho")
+
+    def __init__(self, theta: dict, E_ref: float, exposure: str = "missions", feature: str = "hi",
+                 inspections: dict | None = None, fit_info: dict | None = None, time_unit: str = "mission"):
+        self.theta = {k: float(v) for k, v in theta.items()}
+        self.E_ref = float(E_ref)
+        self.exposure = exposure
+        self.feature = feature
+        self.inspections = inspections or {}  # quantity -> {"alpha", "beta", "log_tau"}
+        self.fit_info = fit_info or {}
+        self.time_unit = time_unit
+
+    # ---- parameters
+    @property
+    def b(self) -> float:
+        return math.exp(self.theta["log_b"])
+
+    def to_json(self, path=None) -> dict:
+        d = {"kind": "hdphm life model v1", "theta": self.theta, "E_ref": self.E_ref, "exposure": self.exposure,
+             "feature": self.feature, "inspections": self.inspections, "fit_info": self.fit_info,
+             "time_unit": self.time_unit,
+             "readable": {"rate_log_mean": self.theta["mu"], "rate_log_std": math.exp(self.theta["log_s"]),
+                          "shape_b": self.b, "hi_change_at_median_threshold": self.theta["c"],
+                          "hi_offset_mean": self.theta["a0"], "hi_offset_std": math.exp(self.theta["log_sa"]),
+                          "hi_noise_std": math.exp(self.theta["log_sigma"]),
+                          "threshold_log_std": math.exp(self.theta["log_sD"]),
+                          "hi_noise_ar1": math.tanh(self.theta.get("atanh_rho", 0.0))}}
+        if path:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            Path(path).write_text(json.dumps(d, indent=1, default=float))
+        return d
+
+    @classmethod
+    def from_json(cls, src) -> "LifeModel":
+        if not isinstance(src, dict):
+            p = Path(src)
+            try:
+                src = json.loads(p.read_text())
+            except (OSError, json.JSONDecodeError) as e:
+                raise ValueError(f"{p}: not a readable life-model JSON ({e})") from e
+            if src.get("kind") != "hdphm life model v1":
+                raise ValueError(f"{p}: not a life model written by 'hdphm prognostic fit' (kind {src.get('kind')!r})")
+        return cls(src["theta"], src["E_ref"], src.get("exposure", "missions"), src.get("feature", "hi"),
+                   src.get("inspections", {}), src.get("fit_info", {}), src.get("time_unit", "mission"))
+
+    def log_marginal(self, units: list[UnitHistory]) -> np.ndarray:
+        """Log marginal likelihood of each unit's record and events under this model."""
+        bt = _Batch(units, self.E_ref, quantities=sorted(self.inspections))
+        z, f, dz = bt.grid(self.theta, self.b, self.inspections)
+        return _lse(f) + np.log(dz)
+
+    # ---- fit
+    @classmethod
+    def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
+            time_unit: str = "mission", maxiter: int = 600, progress: bool = False) -> "LifeModel":
+        """Maximum likelihood over the units (their HI histories and events); see the module docstring."""
+        units = [u for u in units if len(u.t) >= 2 and np.isfinite(u.y).sum() >= 2]
+        if len(units) < 2:
+            raise ValueError(f"life-model fit: {len(units)} unit(s) with >= 2 finite health-indicator values; need >= 2")
+        nfail = sum(u.events.failure is not None for u in units)
+        if nfail < 2:
+            raise ValueError(f"life-model fit: {nfail} failure(s) among {len(units)} units: the failure threshold "
+                             "is not identifiable without at least 2 failures in the events")
+        # exposure scale: median exposure at failure / censoring
+        ends = [u.exposure_at(u.events.failure) if u.events.failure is not None else u.E[-1] for u in units]
+        E_ref = float(np.median([e for e in ends if e > 0]))
+        # start: per-unit least squares y = a_i + m_i X (b = 1)
+        m_i, a_i, res, cf, ac = [], [], [], [], []
+        for u, e in zip(units, ends):
+            ok = np.isfinite(u.y)
+            X = u.E[ok] / E_ref
+            A = np.column_stack([np.ones(ok.sum()), X])
+            coef, *_ = np.linalg.lstsq(A, u.y[ok], rcond=None)
+            a_i.append(coef[0])
+            m_i.append(coef[1])
+            res.append(u.y[ok] - A @ coef)
+            if len(res[-1]) > 3 and np.std(res[-1]) > 0:
+                ac.append(float(np.corrcoef(res[-1][:-1], res[-1][1:])[0, 1]))
+            if u.events.failure is not None:
+                cf.append(coef[1] * e / E_ref)
+        c0 = float(np.median(cf))
+        if c0 == 0:
+            c0 = float(np.median(m_i)) or 1.0
+        rr = np.array(m_i) / c0
+        lr = np.log(rr[rr > 0]) if (rr > 0).sum() >= 2 else np.zeros(2)
+        sig0 = float(np.std(np.concatenate(res))) or 1e-6
+        theta0 = {"mu": float(np.mean(lr)), "log_s": math.log(max(float(np.std(lr)), 0.05)), "log_b": 0.0,
+                  "c": c0, "a0": float(np.mean(a_i)), "log_sa": math.log(max(float(np.std(a_i)), 0.1 * sig0)),
+                  "log_sigma": math.log(sig0), "log_sD": math.log(0.2),
+                  "atanh_rho": math.atanh(float(np.clip(np.median(ac) if ac else 0.0, -0.9, 0.9)))}
+        # inspection maps: quantities with enough inspections
+        by_q: dict[str, int] = {}
+        for u in units:
+            for _, q, _ in u.events.inspections:
+                by_q[q] = by_q.get(q, 0) + 1
+        notes = [f"inspections of {q!r}: {n} < {MIN_INSPECTIONS}, not used" for q, n in by_q.items()
+                 if n < MIN_INSPECTIONS]
+        qs = sorted(q for q, n in by_q.items() if n >= MIN_INSPECTIONS)
+        insp0 = {}
+        for q in qs:  # start: regress the value on the start model's latent path (median unit)
+            v = [(x[2], (u.exposure_at(x[0]) / E_ref) * math.exp(theta0["mu"])) for u in units
+                 for x in u.events.inspections if x[1] == q]
+            V, L = np.array(v).T
+            A = np.column_stack([np.ones_like(L), L])
+            coef, *_ = np.linalg.lstsq(A, V, rcond=None)
+            sd = float(np.std(V - A @ coef)) or abs(float(np.mean(V))) * 0.1 or 1e-6
+            insp0[q] = {"alpha": float(coef[0]), "beta": float(coef[1]), "log_tau": math.log(sd)}
+        keys = list(cls.PARAMS) + [f"{q}|{k}" for q in qs for k in ("alpha", "beta", "log_tau")]
+        x0 = np.array([theta0[k] for k in cls.PARAMS] + [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")])
+        scale = np.array([1.0, 1.0, 1.0, abs(c0), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, 1.0, 1.0]
+                         + [max(abs(insp0[q][k]), 1e-9) if k != "log_tau" else 1.0
+                            for q in qs for k in ("alpha", "beta", "log_tau")])
+
+        def unpack(x):
+            x = x * scale
+            npar = len(cls.PARAMS)
+            th = dict(zip(cls.PARAMS, x[:npar]))
+            ins = {q: {k: float(x[npar + 3 * j + i]) for i, k in enumerate(("alpha", "beta", "log_tau"))}
+                   for j, q in enumerate(qs)}
+            return th, ins
+
+        batch = _Batch(units, E_ref, quantities=qs)
+        windows = np.full((len(units), 2), np.nan)
+
+        def nll(xs):
+            th, ins = unpack(xs)
+            if not (-6 < th["log_b"] < 2.5 and -9 < th["log_sD"] < 2 and -9 < th["log_s"] < 3
+                    and abs(th["atanh_rho"]) < 3.0):
+                return 1e30
+            z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=windows)
+            lm = _lse(f) + np.log(dz)
+            if not np.all(np.isfinite(lm)):
+                return 1e30
+            return -float(lm.sum())
+
+        xs0 = x0 / scale
+        # quasi-Newton first (finite-difference gradients of a smooth quadrature), then a Nelder-Mead polish
+        # (robust where the adaptive grid makes the finite differences noisy)
+        r = optimize.minimize(nll, xs0, method="L-BFGS-B", options={"maxiter": 300, "eps": 1e-6})
+        x1 = r.x if np.isfinite(r.fun) and r.fun < nll(xs0) else xs0
+        r2 = optimize.minimize(nll, x1, method="Nelder-Mead",
+                               options={"maxiter": maxiter, "maxfev": maxiter, "xatol": 1e-4, "fatol": 1e-3,
+                                        "adaptive": True})
+        th, ins = unpack(r2.x)
+        info = {"n_units": len(units), "n_failures": nfail, "n_censored": len(units) - nfail,
+                "n_records": int(sum(np.isfinite(u.y).sum() for u in units)), "log_likelihood": float(-r2.fun),
+                "n_params": len(keys), "evals": [int(r.nfev), int(r2.nfev)], "lbfgs_loglik": float(-r.fun), "converged": bool(r2.success),
+                "start": theta0, "notes": notes, "units": [u.unit for u in units],
+                "rate_median": float(np.nanmedian([u.rate() for u in units])),
+                "hours_per_step": (float(np.median(hp)) if (hp := [u.hours_per_step for u in units
+                                                                  if u.hours_per_step]) else None)}
+        return cls(th, E_ref, exposure, feature, ins, info, time_unit)
+
+    # ---- prognosis
+    def posterior(self, u: UnitHistory, times=None) -> tuple[np.ndarray, np.ndarray]:
+        """Grid posteriors over z = ln r, one row per time t_k in ``times`` (default: every record), each
+        given the record up to t_k and survival to ``E(t_k)``: (z grid, weights), shapes (K, n)."""
+        times = u.t if times is None else np.atleast_1d(np.asarray(times, float))
+        hs = [u.truncated(t) for t in times]
+        bt = _Batch(hs, self.E_ref, censor_at=list(times), quantities=sorted(self.inspections))
+        z, f, _ = bt.grid(self.theta, self.b, self.inspections)
+        w = np.exp(f - f.max(1, keepdims=True))
+        return z, w / w.sum(1, keepdims=True)
+
+    def threshold_predictive(self) -> tuple[float, float]:
+        """(dof, scale) of the predictive distribution of a new unit's ln D: the fitted normal scatter
+        estimated from n failures, widened to the Student-t predictive (n - 1 dof, scale s_D sqrt(1 + 1/n))."""
+        n = int(self.fit_info.get("n_failures", 0))
+        sD = math.exp(self.theta["log_sD"])
+        if n >= 3:
+            return float(n - 1), sD * math.sqrt(1.0 + 1.0 / n)
+        return float("inf"), sD
+
+    def sample_failure_exposure(self, z: np.ndarray, E_k: float, rng: np.random.Generator) -> np.ndarray:
+        """E_f per sample of z: threshold from its predictive law truncated to 'not failed by E_k'."""
+        b = self.b
+        df, sc = self.threshold_predictive()
+        dist = stats.norm() if not np.isfinite(df) else stats.t(df)
+        lo = (z + b * math.log(E_k / self.E_ref)) / sc if E_k > 0 else np.full_like(z, -np.inf)
+        p_lo = dist.cdf(lo)
+        u = p_lo + (1.0 - p_lo) * rng.uniform(0.0, 1.0, len(z))
+        x = dist.ppf(np.minimum(u, 1 - 1e-15))
+        bad = ~np.isfinite(x) | (x < lo)
+        x[bad] = lo[bad] + np.abs(rng.standard_normal(int(bad.sum()))) * 0.1  # far tail: just past the bound
+        return self.E_ref * np.exp((sc * x - z) / b)
+
+    def rul_samples(self, z: np.ndarray, u: UnitHistory, t_k: float, rng: np.random.Generator) -> np.ndarray:
+        """RUL in the unit's time axis for posterior samples ``z`` at time ``t_k`` (alive at ``t_k``)."""
+        h = u.truncated(t_k)
+        E_k = h.exposure_at(t_k)
+        Ef = self.sample_failure_exposure(z, E_k, rng)
+        rate = h.rate()
+        if not (np.isfinite(rate) and rate > 0):
+            rate = float(self.fit_info.get("rate_median", 1.0))
+        if h.discrete:
+            # failure is found at the start of the first step whose start exposure reaches E_f
+            E1 = h.exposure_at(t_k + 1, rate)  # exposure at the start of the next step (its own known load)
+            return 1.0 + np.ceil(np.maximum(Ef - E1, 0.0) / rate)
+        return (Ef - E_k) / rate
+
+    def latent_quantiles(self, z, w, X: float) -> tuple[float, float, float]:
+        c = np.cumsum(w)
+        q = np.interp([0.05, 0.5, 0.95], c, z)
+        return tuple(float(np.exp(v) * X) for v in q)
+
+
+def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, seed: int = 0,
+                    t_start: float | None = None, method: str = "grid"):
+    """RUL history of one unit: posterior at every record from ``t_start`` on (``method``: ``grid`` = exact
+    posterior over z; ``ukf`` = unscented Kalman filter over (z, a) on the same model)."""
+    from hd_prognostic.tracking import RULHistory
+
+    rng = np.random.default_rng(seed)
+    hist = RULHistory(unit=u.unit, time_unit=model.time_unit, state_names=("L",), threshold=1.0)
+    ukf = _UKF(model) if method == "ukf" else None
+    hrs, h5, h50, h95 = u.hours_per_step or model.fit_info.get("hours_per_step"), [], [], []
+    if ukf is None:
+        ZG, WG = model.posterior(u)
+    for k, tk in enumerate(u.t):
+        X = (max(u.E[k], 0.0) / model.E_ref) ** model.b
+        if ukf is not None:
+            ukf.update(u.y[k], X)
+            z = ukf.sample(n_samples, rng)
+            # survival to E(t_k) as importance weights on the Gaussian posterior
+            sD = math.exp(model.theta["log_sD"])
+            lw = special.log_ndtr(-(z + model.b * math.log(max(u.E[k], 1e-300) / model.E_ref)) / sD) \
+                if u.E[k] > 0 else np.zeros(n_samples)
+            w = np.exp(lw - lw.max())
+            z = z[rng.choice(n_samples, n_samples, p=w / w.sum())]
+            zq = np.quantile(z, [0.05, 0.5, 0.95])
+            lq = tuple(float(np.exp(v) * X) for v in zq)
+        else:
+            zg, wg = ZG[k], WG[k]
+            dz = zg[1] - zg[0]
+            z = rng.choice(zg, n_samples, p=wg) + rng.uniform(-0.5, 0.5, n_samples) * dz
+            lq = model.latent_quantiles(zg, wg, X)
+        hist.t.append(float(tk))
+        hist.z.append(float(u.y[k]))
+        hist.state_mean.append([lq[1]])
+        hist.state_p5.append([lq[0]])
+        hist.state_p95.append([lq[2]])
+        hist.ess.append(float("nan"))
+        if t_start is not None and tk < t_start:
+            continue
+        r = model.rul_samples(z, u, tk, rng)
+        q = np.quantile(r, [0.05, 0.5, 0.95])
+        hist.rul_t.append(float(tk))
+        hist.p5.append(float(q[0]))
+        hist.p50.append(float(q[1]))
+        hist.p95.append(float(q[2]))
+        hist.mean.append(float(np.mean(r)))
+        hist.samples.append(r)
+        if hrs:
+            h5.append(float(q[0] * hrs))
+            h50.append(float(q[1] * hrs))
+            h95.append(float(q[2] * hrs))
+    hist.meta.update({"model": "life model (latent degradation path)", "method": method,
+                      "exposure": model.exposure, "feature": model.feature, "hours_per_step": hrs})
+    if hrs:
+        hist.meta["rul_hours"] = {"p5": h5, "p50": h50, "p95": h95}
+    return hist
+
+
+class _UKF:
+    """Unscented Kalman filter over (z, a) of one unit (static state; y = a + c exp(z) X + e)."""
+
+    def __init__(self, model: LifeModel):
+        th = model.theta
+        self.c, self.sig = th["c"], math.exp(th["log_sigma"])
+        self.rho = math.tanh(th.get("atanh_rho", 0.0))
+        self.prev = None  # (y, X) of the previous finite record: AR(1) residuals are prewhitened
+        self.x = np.array([th["mu"], th["a0"]])
+        self.P = np.diag([math.exp(th["log_s"]) ** 2, math.exp(th["log_sa"]) ** 2])
+        n, alpha, beta, kappa = 2, 0.5, 2.0, 0.0
+        lam = alpha ** 2 * (n + kappa) - n
+        self.cc = n + lam
+        self.wm = np.full(2 * n + 1, 0.5 / self.cc)
+        self.wc = self.wm.copy()
+        self.wm[0] = lam / self.cc
+        self.wc[0] = lam / self.cc + (1 - alpha ** 2 + beta)
+
+    def update(self, y: float, X: float) -> None:
+        if not np.isfinite(y):
+            self.prev = None
+            return
+        P = 0.5 * (self.P + self.P.T)
+        w, V = np.linalg.eigh(self.cc * P)
+        S = V @ np.diag(np.sqrt(np.maximum(w, 0.0)))
+        Xs = np.vstack([self.x, self.x + S.T, self.x - S.T])
+        rho = self.rho
+        if self.prev is None:  # chain start: marginal variance sigma^2 / (1 - rho^2)
+            Z = Xs[:, 1] + self.c * np.exp(Xs[:, 0]) * X
+            r2, meas = self.sig ** 2 / (1.0 - rho * rho), y
+        else:
+            yp, Xp = self.prev
+            Z = Xs[:, 1] * (1.0 - rho) + self.c * np.exp(Xs[:, 0]) * (X - rho * Xp)
+            r2, meas = self.sig ** 2, y - rho * yp
+        self.prev = (y, X)
+        y = meas
+        zm = self.wm @ Z
+        Sz = self.wc @ (Z - zm) ** 2 + r2
+        C = (self.wc[:, None] * (Xs - self.x)).T @ (Z - zm)
+        K = C / Sz
+        self.x = self.x + K * (y - zm)
+        self.P = self.P - np.outer(K, K) * Sz
+
+    def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        sd = math.sqrt(max(self.P[0, 0], 0.0))
+        return self.x[0] + sd * rng.standard_normal(n)
+
+
+def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
+             progress: bool = False) -> LifeModel:
+    """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one;
+    the log-likelihoods of all candidates go into ``fit_info["exposure_candidates"]``."""
+    fits, errs = {}, {}
+    for name, units in candidates.items():
+        try:
+            fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit)
+        except ValueError as e:
+            errs[name] = str(e)
+            continue
+        if progress:
+            print(f"  exposure {name}: log-likelihood {fits[name].fit_info['log_likelihood']:.2f}", flush=True)
+    if not fits:
+        raise ValueError("; ".join(f"{k}: {v}" for k, v in errs.items()))
+    best = max(fits, key=lambda k: fits[k].fit_info["log_likelihood"])
+    m = fits[best]
+    m.fit_info["exposure_candidates"] = {k: f.fit_info["log_likelihood"] for k, f in fits.items()}
+    if errs:
+        m.fit_info["exposure_errors"] = errs
+    return m
+
+
+def predict_at(model: LifeModel, u: UnitHistory, rng: np.random.Generator, n_samples: int = 500) -> dict:
+    """One prediction at the unit's last record (what the prognostic node publishes per mission):
+    latent degradation P5/P50/P95 (1 = median failure threshold) and RUL samples in the unit's time axis."""
+    tk = float(u.t[-1])
+    zg, wg = model.posterior(u, [tk])
+    zg, wg = zg[0], wg[0]
+    z = rng.choice(zg, n_samples, p=wg) + rng.uniform(-0.5, 0.5, n_samples) * (zg[1] - zg[0])
+    X = (max(u.E[-1], 0.0) / model.E_ref) ** model.b
+    lq = model.latent_quantiles(zg, wg, X)
+    return {"latent": lq, "rul": model.rul_samples(z, u, tk, rng)}

@@ -1,0 +1,52 @@
+"""Synthetic fleets drawn from the life model's own generative law (known parameters), for tests."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from hd_prognostic.lifemodel import UnitEvents, UnitHistory
+
+#: the shared measured data (NASA cells, Virkler): $HDPHM_MEASURED_DATA, else the shared folder next to the
+#: repository checkout (tests only; the package takes data paths as arguments)
+MEASURED = Path(os.environ.get("HDPHM_MEASURED_DATA") or
+                Path(__file__).resolve().parents[3] / "shared" / "data" / "measured")
+if not MEASURED.is_dir():
+    MEASURED = Path("/work/shared/data/measured")
+
+TRUTH = {"mu": 0.0, "s": 0.25, "b": 1.6, "c": 2.0, "a0": 1.0, "sa": 0.3, "sigma": 0.08, "sD": 0.10}
+E_REF = 100.0  # missions
+
+
+def synth_units(n: int, seed: int, truth: dict = TRUTH, censor_frac: float = 0.3, max_t: int = 1000,
+                inspect_every: int = 0) -> tuple[list[UnitHistory], dict]:
+    """n units: HI every mission until the failure (found at the start of mission k_f) or a removal."""
+    rng = np.random.default_rng(seed)
+    units, eol = [], {}
+    for i in range(n):
+        z = rng.normal(truth["mu"], truth["s"])
+        lnD = rng.normal(0.0, truth["sD"])
+        Ef = E_REF * math.exp((lnD - z) / truth["b"])
+        kf = int(math.ceil(Ef))  # first mission whose start exposure reaches E_f
+        a = rng.normal(truth["a0"], truth["sa"])
+        ev = UnitEvents()
+        last = kf - 1
+        if rng.random() < censor_frac:
+            rem = int(rng.integers(max(2, kf // 3), kf))
+            ev.removal = float(rem)
+            last = rem - 1
+        else:
+            ev.failure = float(kf)
+        t = np.arange(0, min(last, max_t) + 1, dtype=float)
+        y = a + truth["c"] * math.exp(z) * (t / E_REF) ** truth["b"] + rng.normal(0, truth["sigma"], len(t))
+        if inspect_every:
+            for ti in t[inspect_every::inspect_every]:
+                L = math.exp(z) * (ti / E_REF) ** truth["b"]
+                ev.inspections.append((float(ti), "wear_depth", 40e-6 * L + rng.normal(0, 1e-6)))
+        units.append(UnitHistory(f"U{i:02d}", t, y, t.copy(), discrete=True, E_next=float(t[-1] + 1),
+                                 events=ev))
+        eol[f"U{i:02d}"] = kf
+    return units, eol

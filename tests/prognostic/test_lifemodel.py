@@ -1,0 +1,153 @@
+"""Life model fitted from operator records (HI histories + failure/removal/inspection events)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from hd_prognostic.lifemodel import (LifeModel, UnitEvents, attach_events, predict_history, read_events,
+                                     read_hi_csv, write_events, write_hi_csv)
+from hdphm.cli import main as hdphm
+from tests.prognostic.lifesynth import E_REF, TRUTH, synth_units
+
+
+@pytest.fixture(scope="module")
+def synth_fit():
+    units, eol = synth_units(20, seed=1, censor_frac=0.3, inspect_every=30)
+    return units, eol, LifeModel.fit(units)
+
+
+def test_fit_recovers_synthetic_model_with_censoring(synth_fit):
+    units, _, m = synth_fit
+    assert m.fit_info["n_censored"] >= 3 and m.fit_info["n_failures"] >= 10
+    r = m.to_json()["readable"]
+    assert r["shape_b"] == pytest.approx(TRUTH["b"], rel=0.15)
+    assert r["hi_change_at_median_threshold"] == pytest.approx(TRUTH["c"], rel=0.15)
+    assert r["hi_noise_std"] == pytest.approx(TRUTH["sigma"], rel=0.1)
+    assert r["hi_offset_mean"] == pytest.approx(TRUTH["a0"], abs=3 * TRUTH["sa"] / math.sqrt(20))
+    assert 0.4 * TRUTH["sD"] < r["threshold_log_std"] < 2.0 * TRUTH["sD"]
+    assert 0.5 * TRUTH["s"] < r["rate_log_std"] < 2.0 * TRUTH["s"]
+    # the median unit fails at E_REF: exp(-mu_hat / b_hat) E_ref_hat must land near it
+    assert m.E_ref * math.exp(-r["rate_log_mean"] / r["shape_b"]) == pytest.approx(E_REF, rel=0.12)
+    # the inspection map (wear depth = 40 um x latent) is recovered too
+    ins = m.inspections["wear_depth"]
+    assert ins["beta"] == pytest.approx(40e-6, rel=0.15)
+    # the fit maximises the likelihood: the start values and a perturbed optimum score lower
+    lm = m.log_marginal(units).sum()
+    assert lm == pytest.approx(m.fit_info["log_likelihood"], rel=1e-6)
+    worse = LifeModel(dict(m.theta, log_sD=m.theta["log_sD"] + 0.3), m.E_ref, inspections=m.inspections)
+    assert worse.log_marginal(units).sum() < lm
+
+
+def test_prediction_is_calibrated_on_units_from_the_fitted_law(synth_fit):
+    """Calibrated (P5-P95 coverage) and sharper than the same model without the unit's HI (population prior
+    and survival to the elapsed exposure only): the HI history must narrow the band in the second half."""
+    _, _, m = synth_fit
+    test, eol = synth_units(10, seed=5, censor_frac=0.0)
+    from hd_prognostic import metrics as M
+
+    cov, width, width_prior = [], [], []
+    for u in test:
+        u.events = UnitEvents()
+        h = predict_history(m, u, n_samples=400, seed=0)
+        cov.append(M.score_history(h.rul_t, h.p50, h.p5, h.p95, eol[u.unit])["coverage_p5_p95"])
+        u0 = type(u)(u.unit, u.t, np.full_like(u.y, np.nan), u.E, u.discrete, u.E_next)
+        h0 = predict_history(m, u0, n_samples=400, seed=0)
+        half = np.asarray(h.rul_t) >= 0.5 * eol[u.unit]
+        width.append(np.mean((np.asarray(h.p95) - np.asarray(h.p5))[half]))
+        width_prior.append(np.mean((np.asarray(h0.p95) - np.asarray(h0.p5))[half]))
+    # 10 units; coverage is correlated along one unit's life (one threshold draw per unit): a loose bound
+    assert 0.55 < np.mean(cov) <= 1.0
+    assert np.mean(width) < 0.7 * np.mean(width_prior)
+
+
+def test_fit_needs_failures():
+    units, _ = synth_units(5, seed=2, censor_frac=1.0)
+    with pytest.raises(ValueError, match="failure"):
+        LifeModel.fit(units)
+
+
+@pytest.mark.parametrize("text,match", [
+    ("actuator_id,mission_index,event,quantity,value\nA,3,failed,,\n", "row 2: event 'failed'"),
+    ("actuator_id,mission_index,event,quantity,value\nA,x,failure,,\n", "row 2: mission_index 'x'"),
+    ("actuator_id,mission_index,event,quantity,value\nA,3,inspection,,1.0\n", "row 2: inspection without a quantity"),
+    ("actuator_id,mission_index,event,quantity,value\nA,3,inspection,backlash,abc\n", "row 2: inspection value"),
+    ("actuator_id,mission_index,event,quantity,value\nA,3,failure,,\nA,5,removal,,\n", "row 3: A already has"),
+    ("actuator_id,event\nA,failure\n", "row 1 \\(header\\): missing column"),
+    ("actuator_id,mission_index,event,quantity,value\n,3,failure,,\n", "row 2: empty actuator_id"),
+])
+def test_events_errors_name_file_and_row(tmp_path, text, match):
+    p = tmp_path / "ev.csv"
+    p.write_text(text)
+    with pytest.raises(ValueError, match=f"ev.csv: {match}"):
+        read_events(p)
+    assert hdphm(["prognostic", "fit", str(p), "--events", str(p), "--out", str(tmp_path / "m.json")]) == 2
+
+
+def test_events_roundtrip_and_docs_example(tmp_path):
+    from pathlib import Path
+
+    ex = read_events(Path(__file__).resolve().parents[2] / "docs" / "events_example.csv")
+    assert any(e.failure is not None for e in ex.values()) and any(e.removal is not None for e in ex.values())
+    assert any(e.inspections for e in ex.values())
+    write_events(tmp_path / "e.csv", ex)
+    back = read_events(tmp_path / "e.csv")
+    assert {k: (v.failure, v.removal, v.inspections) for k, v in back.items()} == \
+        {k: (v.failure, v.removal, v.inspections) for k, v in ex.items()}
+
+
+def test_csv_path_fit_prognose_metrics(tmp_path):
+    units, eol = synth_units(8, seed=3, censor_frac=0.25)
+    held = units.pop()
+    write_hi_csv(tmp_path / "hi.csv", units)
+    write_events(tmp_path / "ev.csv", {u.unit: u.events for u in units})
+    write_hi_csv(tmp_path / "held.csv", [held])
+    assert hdphm(["prognostic", "fit", str(tmp_path / "hi.csv"), "--events", str(tmp_path / "ev.csv"),
+                  "--out", str(tmp_path / "m.json")]) == 0
+    m = LifeModel.from_json(tmp_path / "m.json")
+    assert m.fit_info["n_units"] == 7 and m.exposure == "csv exposure"
+    assert hdphm(["prognose", str(tmp_path / "held.csv"), "--model", str(tmp_path / "m.json"),
+                  "--out", str(tmp_path / "p"), "--samples", "300", "--no-plots"]) == 0
+    h = json.loads((tmp_path / "p" / "rul_history.json").read_text())
+    assert len(h["rul_t"]) == len(held.t) and h["rul_quantiles"]
+    assert hdphm(["metrics", str(tmp_path / "p" / "rul_history.json"), "--truth", str(eol[held.unit])]) == 0
+    met = json.loads((tmp_path / "p" / "metrics.json").read_text())
+    assert met["n_predictions"] == len(held.t) and np.isfinite(met["cra"])
+    # the reader refuses a non-cumulative exposure, naming the file
+    (tmp_path / "bad.csv").write_text("unit,time,hi,exposure\nA,0,1.0,5\nA,1,1.1,3\n")
+    with pytest.raises(ValueError, match="bad.csv: unit A: exposure decreases"):
+        read_hi_csv(tmp_path / "bad.csv")
+
+
+def test_attach_events_drops_records_after_failure():
+    units, _ = synth_units(1, seed=4, censor_frac=0.0)
+    u = units[0]
+    n = len(u.t)
+    notes = attach_events([u], {u.unit: UnitEvents(failure=float(n - 3))})
+    assert len(u.t) == n - 3 and "not used" in notes[0]
+
+
+def test_node_tracker_equals_batch(synth_fit):
+    """The prognostic node's LifeTracker (one window row per mission here) gives batch's posterior."""
+    from hd_prognostic.node import PARAMS, LifeTracker
+
+    _, _, m = synth_fit
+    m = LifeModel(m.theta, m.E_ref, "load", "HF_MTW_IF", {}, m.fit_info)
+    units, _ = synth_units(1, seed=8, censor_frac=0.0)
+    u = units[0]
+    W = np.full(len(u.t), 1.0)  # load clock with W = 1 J per mission: E(k) = k
+    u.events = UnitEvents()
+    hb = predict_history(m, u, n_samples=200, seed=0)
+    tr = LifeTracker("U", m, dict(PARAMS, rul_particles=200))
+    rows = []
+    for k in range(len(u.t)):
+        tr.mission_index = float(u.t[k])
+        tr.add_windows([{"feat.HF_MTW_IF": float(u.y[k]), "feat.W_load": float(W[k])}])
+        rows.append(tr.estimate(final=True))
+    for k in (0, len(u.t) // 2, len(u.t) - 1):
+        assert rows[k]["h_p5"] == pytest.approx(hb.state_p5[k][0], rel=1e-9)
+        assert rows[k]["h_mean"] == pytest.approx(hb.state_mean[k][0], rel=1e-9)
+        assert rows[k]["rul_p50"] == pytest.approx(hb.p50[k], rel=0.15, abs=2)
