@@ -97,6 +97,7 @@ class TrainConfig:
     # "auto": the torque balance identified by hd_twin.identify when available, else none;
     # "identified": required; "none": the network predicts the whole Q_red (models before this structure)
     physics_path: str = "auto"
+    gate_blocks: int = 2  # contiguous blocks per validation unit in which the remainder must help
     features: list[str] = field(default_factory=lambda: list(D.FEATURES))  # network inputs (names of hd_twin.data)
 
     @classmethod
@@ -379,8 +380,11 @@ def group_segments(segs: Sequence[D.Segment]) -> list[list[int]]:
     return list(groups.values())
 
 
-def set_gate(pinn, segs: Sequence[D.Segment], outs: Sequence[np.ndarray]) -> dict:
-    """Choose the remainder's gate on held-out segments (:func:`hd_twin.physpath.choose_gate`) and set it."""
+def set_gate(pinn, segs: Sequence[D.Segment], outs: Sequence[np.ndarray], blocks: int = 2) -> dict:
+    """Choose the remainder's gate on held-out segments (:func:`hd_twin.physpath.choose_gate`) and set it.
+
+    Groups: each held-out unit (:func:`group_segments`) cut into ``blocks`` contiguous blocks, so the
+    remainder must help in every block of every unit to be kept."""
     import torch
 
     if not pinn.physpath.active:
@@ -390,10 +394,15 @@ def set_gate(pinn, segs: Sequence[D.Segment], outs: Sequence[np.ndarray]) -> dic
     rem = [pinn.r_mean + pinn.r_std * o[:, 0] for o in outs]
     ys, qs, rs = [], [], []
     for g in group_segments(segs):
-        ys.append(np.concatenate([np.where(segs[i].mask, segs[i].Q_red, np.nan) for i in g]))
-        qs.append(np.concatenate([qp[i] for i in g]))
-        rs.append(np.concatenate([rem[i] for i in g]))
+        y_u = np.concatenate([np.where(segs[i].mask, segs[i].Q_red, np.nan) for i in g])
+        q_u = np.concatenate([qp[i] for i in g])
+        r_u = np.concatenate([rem[i] for i in g])
+        for part in np.array_split(np.arange(len(y_u)), max(1, int(blocks))):
+            ys.append(y_u[part])
+            qs.append(q_u[part])
+            rs.append(r_u[part])
     gate, det = choose_gate(ys, qs, rs)
+    det["blocks_per_unit"] = int(blocks)
     with torch.no_grad():
         pinn.gate.fill_(gate)
     return {"gate": gate} | det
@@ -557,7 +566,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     t1 = time.perf_counter()
     outs_va = predict_outputs(pinn, va_segs, norm, cfg.eval_batch_samples)
     outs_tr = predict_outputs(pinn, tr_segs, norm, cfg.eval_batch_samples)
-    gate_info = set_gate(pinn, va_segs, outs_va)
+    gate_info = set_gate(pinn, va_segs, outs_va, cfg.gate_blocks)
     pinn.cpu()
     metrics = {
         "validation": evaluate(pinn, va_segs, norm, outs=outs_va),
