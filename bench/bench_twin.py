@@ -95,8 +95,9 @@ def _write_source(name: str, out: Path, a: argparse.Namespace) -> None:
 
 
 def _common_rate(missions):
-    """Missions the twin can share one model rate on (mixed log rates: the base rate that keeps the most
-    missions, each an integer multiple of it within 5 %), and a note on the rest."""
+    """Missions one twin can be trained and scored on: one model rate (mixed log rates: the base rate
+    that keeps the most missions, each an integer multiple of it within 5 %) and one gear ratio (the most
+    common), and a note on what was left out."""
     rates = sorted({float(m.fs) for m in missions})
 
     def fits(fs, base):
@@ -105,10 +106,17 @@ def _common_rate(missions):
 
     base = max(rates, key=lambda b: (sum(fits(m.fs, b) for m in missions), -b))
     keep = [m for m in missions if fits(m.fs, base)]
-    note = "" if len(keep) == len(missions) else (
+    notes = [] if len(keep) == len(missions) else [
         f"log rates {sorted({round(r) for r in rates})} Hz: {len(missions) - len(keep)} missions not an integer "
-        f"multiple of {base:.0f} Hz left out")
-    return keep, note
+        f"multiple of {base:.0f} Hz left out"]
+    # one twin per actuator type: the units of the most common gear ratio (a family may draw several)
+    ratios = sorted({float(m.meta.gear_ratio) for m in keep})
+    if len(ratios) > 1:
+        acts = {r: {m.meta.actuator_id for m in keep if float(m.meta.gear_ratio) == r} for r in ratios}
+        N = max(ratios, key=lambda r: (len(acts[r]), -r))
+        notes.append(f"gear ratios {ratios}: the {len(acts[N])} units at N = {N:g} used (one twin per actuator type)")
+        keep = [m for m in keep if float(m.meta.gear_ratio) == N]
+    return keep, "; ".join(notes)
 
 
 def _split_units(missions, held_out: int):
