@@ -15,8 +15,8 @@ or after a dropout gap).
 
 Models with a physics path (``config.json:physics_path``, :mod:`hd_twin.physpath`) output
 ``Q_red = Q_phys + gate * remainder``: the network (ONNX) gives the remainder, and the identified
-torque balance is evaluated on the model-rate samples received since the last reset (at most
-``PHYS_HISTORY_S`` seconds of them). Its derivative filter is centred (Savitzky-Golay); at the newest
+torque balance is evaluated on the model-rate samples received since the last reset (the last two
+derivative-filter windows of them, at most ``PHYS_HISTORY_S`` seconds). Its derivative filter is centred (Savitzky-Golay); at the newest
 samples of each call it uses the end-of-window polynomial fit, i.e. only past samples, so a streamed
 Q_phys equals the batch one except within half a filter window of each call's last sample (a
 whole segment in one call equals batch exactly).
@@ -88,6 +88,7 @@ class StreamingTwin:
         self._phase = 0
         self._hist = np.zeros((0, len(D.RAW_INPUTS)))  # model-rate rows for the physics path
         self._n_model = 0  # model-rate samples since the reset
+        self._keep = None  # physics-path history length (set at the first step)
         self.h = np.zeros((self.layers, 1, self.hidden), np.float32)
         self.c = np.zeros((self.layers, 1, self.hidden), np.float32)
 
@@ -144,6 +145,18 @@ class StreamingTwin:
             si[0] = q_phys + self.gate * si[0]
         return {"Q_red": si[0], "Q_phys": q_phys, "x_FS": si[1] + self.params["r_b"] * Xd[:, 0], "y_FS": si[2], "index": idx}
 
+    def _phys_keep(self, dt: float) -> int:
+        """Model-rate rows the physics path keeps: two windows of identify's derivative filter (all the
+        newest samples' end-of-window fit needs), at most ``PHYS_HISTORY_S``."""
+        cap = max(16, int(PHYS_HISTORY_S / dt))
+        try:
+            from .identify import sg_window  # noqa: PLC0415
+
+            w = sg_window(1.0 / dt, float(getattr(self.physpath.identified, "cutoff_hz")))
+        except (ImportError, AttributeError, TypeError, ValueError):
+            return cap
+        return int(min(cap, max(16, 2 * w + 2)))
+
     def _phys(self, Xd: np.ndarray) -> np.ndarray:
         """The identified physics path on the new model-rate rows, with the history since the reset."""
         Xd = Xd.copy()
@@ -157,7 +170,9 @@ class StreamingTwin:
         H = np.vstack([self._hist, Xd])
         dt = self.decimation / self.fs_in
         q = self.physpath.predict_X(H, dt, t0=(self._n_model - len(self._hist)) * dt)[-len(Xd):]
-        keep = max(16, int(PHYS_HISTORY_S / dt))
+        if self._keep is None:
+            self._keep = self._phys_keep(dt)
+        keep = self._keep
         self._hist = H[-keep:]
         self._n_model += len(Xd)
         return q
