@@ -31,6 +31,8 @@ Public API (used by ``hd_twin`` and ``hd_ground.discovery``; never imports
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass, field
 from typing import Callable, Mapping, Sequence
 
@@ -55,8 +57,14 @@ def sg_window(fs: float, cutoff_hz: float = DERIV_CUTOFF_HZ, polyorder: int = 3)
 
     Designed numerically at the sample rate ``fs``: the longest window whose derivative filter still has
     |H(f)| >= |j 2 pi f| / sqrt(2) at ``cutoff_hz`` (the ideal differentiator's gain, -3 dB), so a 200 Hz
-    and a 2 kHz log get the same band.
+    and a 2 kHz log get the same band. A pure function of its arguments, cached (the streaming twin asks for
+    it on every call): ``fs`` is taken to 6 significant digits.
     """
+    return _sg_window(float(f"{float(fs):.6g}"), float(cutoff_hz), int(polyorder))
+
+
+@functools.lru_cache(maxsize=64)
+def _sg_window(fs: float, cutoff_hz: float, polyorder: int) -> int:
     from scipy.signal import savgol_coeffs
 
     fc = min(max(cutoff_hz, 1e-6), 0.45 * fs)
