@@ -89,8 +89,6 @@ def derivative(x: np.ndarray, t: np.ndarray, *, segment: np.ndarray | None = Non
     The window is designed at each segment's median sample rate (:func:`sg_window`), so a 200 Hz and a
     2 kHz log get the same cut-off. Segments too short for the window use central differences.
     """
-    from scipy.signal import savgol_filter
-
     x = np.asarray(x, float)
     t = np.asarray(t, float)
     seg = np.zeros(len(x), int) if segment is None else np.asarray(segment)
@@ -104,9 +102,37 @@ def derivative(x: np.ndarray, t: np.ndarray, *, segment: np.ndarray | None = Non
             raise IdentifyError(f"time stamps do not increase in segment {s}")
         w = sg_window(1.0 / dt, cutoff_hz, polyorder)
         if len(idx) > w:
-            out[idx] = savgol_filter(x[idx], w, polyorder, deriv=1, delta=dt)
+            out[idx] = _sg_derivative(x[idx], w, polyorder, dt)
         else:
             out[idx] = np.gradient(x[idx], t[idx])
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _sg_coefficients(w: int, polyorder: int, dt_key: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Savitzky-Golay first-derivative weights: the centre row and the left / right edge rows (each a
+    fit of the first / last ``w`` samples evaluated at the edge positions, as ``savgol_filter``'s
+    ``mode="interp"`` does with a polynomial fit per call)."""
+    from scipy.signal import savgol_coeffs
+
+    dt = float(dt_key)
+    m = w // 2
+    centre = savgol_coeffs(w, polyorder, deriv=1, delta=dt, use="dot")
+    left = np.array([savgol_coeffs(w, polyorder, deriv=1, delta=dt, pos=k, use="dot") for k in range(m)])
+    right = np.array([savgol_coeffs(w, polyorder, deriv=1, delta=dt, pos=k, use="dot") for k in range(w - m, w)])
+    return centre, left, right
+
+
+def _sg_derivative(x: np.ndarray, w: int, polyorder: int, dt: float) -> np.ndarray:
+    """``savgol_filter(x, w, polyorder, deriv=1, delta=dt)`` (mode ``interp``) with cached weights: the
+    streaming twin evaluates it on a short history at every sample, where the per-call edge fits cost
+    ~1 ms."""
+    centre, left, right = _sg_coefficients(int(w), int(polyorder), f"{float(dt):.12g}")
+    m = w // 2
+    out = np.empty(len(x))
+    out[m:len(x) - m] = np.correlate(x, centre, mode="valid")
+    out[:m] = left @ x[:w]
+    out[len(x) - m:] = right @ x[-w:]
     return out
 
 

@@ -130,3 +130,16 @@ def test_bad_input_is_named():
         identify_torque_balance(drive(0), "Q_x")
     with pytest.raises(IdentifyError, match="'t'"):
         identify_torque_balance([{"omega_m": np.ones(10), "tau_m": np.ones(10)}], "tau_m")
+
+
+def test_cached_savgol_derivative_equals_scipy_savgol_filter():
+    """The cached-weight derivative (used at every streamed sample) is scipy's savgol_filter, edges included."""
+    from scipy.signal import savgol_filter
+
+    from hd_twin.identify import _sg_derivative
+
+    rng = np.random.default_rng(3)
+    for n, w, p, dt in ((50, 11, 3, 1e-3), (1000, 41, 3, 4e-3), (17, 15, 3, 5e-3), (300, 7, 2, 1e-2)):
+        x = rng.normal(size=n).cumsum()
+        ref = savgol_filter(x, w, p, deriv=1, delta=dt)
+        np.testing.assert_allclose(_sg_derivative(x, w, p, dt), ref, rtol=0, atol=1e-9 * np.abs(ref).max())
