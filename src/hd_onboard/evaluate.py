@@ -29,7 +29,7 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -309,26 +309,17 @@ def first_crossings(res: dict, core: OnboardCore) -> dict[str, float | None]:
 GROUND_SEED_OFFSET = 1000
 
 
-def _sim_mission(actuator: int, pop_seed: int, seed: int, duration: float, mission_index: int, fault=None):
-    """One simulated mission of the study (t0 set); ``fault`` None: healthy."""
-    import dataclasses
-
-    from hd_sim import EffectSet, sample_population, simulate_mission
-
-    p = sample_population(actuator + 1, seed=pop_seed)[actuator]
-    m, _ = simulate_mission(p, EffectSet.default(), "inspection", seed, duration=duration, mission_index=mission_index,
-                            fault=fault)
-    return dataclasses.replace(m, t0_ns=1_700_000_000_000_000_000)
-
-
 def study_calibration(ground: int, actuator: int = 2, pop_seed: int = 7, seed0: int = 40, duration: float = 16.0,
-                      config: OnboardConfig | None = None) -> dict[str, Any]:
+                      config: OnboardConfig | None = None, *, simulate: Callable) -> dict[str, Any]:
     """Ground calibration of the study's unit: ``ground`` healthy missions of the same unit (seeds
     ``seed0 + GROUND_SEED_OFFSET + j``, never a fault mission's), through
-    :func:`hd_ground.references.calibrate_actuator`; returns its ``thresholds`` and ``references``."""
+    :func:`hd_ground.references.calibrate_actuator`; returns its ``thresholds`` and ``references``.
+    ``simulate(actuator, pop_seed, seed, duration, mission_index, fault)`` makes a mission (the
+    scoring harness passes the plant's, :func:`hdphm.onboard_study.sim_mission`: estimators never
+    import the simulator)."""
     from hd_ground.references import calibrate_actuator
 
-    ms = [_sim_mission(actuator, pop_seed, seed0 + GROUND_SEED_OFFSET + j, duration, j) for j in range(ground)]
+    ms = [simulate(actuator, pop_seed, seed0 + GROUND_SEED_OFFSET + j, duration, j) for j in range(ground)]
     cal = calibrate_actuator(ms, config=config)
     return {"seeds": [seed0 + GROUND_SEED_OFFSET + j for j in range(ground)], "thresholds": cal["thresholds"],
             "references": cal["references"]}
@@ -336,7 +327,7 @@ def study_calibration(ground: int, actuator: int = 2, pop_seed: int = 7, seed0: 
 
 def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed: int = 7, seed0: int = 40,
                     duration: float = 16.0, config: OnboardConfig | None = None, progress: bool = False,
-                    ground: int = 0, missions: dict | None = None) -> dict[str, Any]:
+                    ground: int = 0, missions: dict | None = None, *, simulate: Callable) -> dict[str, Any]:
     """Detection delay of the onboard core (physics stand-in) on simulated faults.
 
     Mission ``k`` of a case: unit ``actuator`` of the ``pop_seed`` population, seed ``seed0 + k``,
@@ -348,7 +339,7 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
     (delay not scored). ``missions``: a dict reused across calls (simulated fault missions cached by
     case and seed, so both modes score the same missions). Returns per case the rows ``(seed, onset,
     first flag [s] or None, delay [s] or None, reasons, first crossing per source)`` and a summary
-    (detected, missed, early, median / max delay).
+    (detected, missed, early, median / max delay). ``simulate``: as in :func:`study_calibration`.
     """
     from hd_onboard.detector import ChannelThreshold
 
@@ -356,7 +347,7 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
     cache = missions if missions is not None else {}
     cal = None
     if ground:
-        cal = study_calibration(ground, actuator, pop_seed, seed0, duration, cfg)
+        cal = study_calibration(ground, actuator, pop_seed, seed0, duration, cfg, simulate=simulate)
         th = {c: ChannelThreshold.from_dict(v, "study ground thresholds") for c, v in cal["thresholds"].items()}
     out = []
     it = [(c, k) for c in cases for k in range(n)]
@@ -373,7 +364,7 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
         t_on, seed = (float(c[2]) if len(c) > 2 else 8.0 + 0.5 * k), seed0 + k
         key = (actuator, pop_seed, seed, name, float(sev), t_on, duration)
         if key not in cache:
-            cache[key] = _sim_mission(actuator, pop_seed, seed, duration, k,
+            cache[key] = simulate(actuator, pop_seed, seed, duration, k,
                                       {"name": name, "severity": float(sev), "t_onset": t_on})
         m = cache[key]
         core = OnboardCore(gear_ratio=m.meta.gear_ratio, config=cfg, thresholds=th if cal else None)
@@ -456,21 +447,9 @@ def study_table(study: dict, fa: dict | None = None) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    """``python -m hd_onboard.evaluate study --healthy DIR [--n 6] [--actuator 2] [--seed0 40] --out DIR``."""
-    import argparse
-
-    ap = argparse.ArgumentParser(prog="python -m hd_onboard.evaluate",
-                                 description="onboard detection study: delay per fault and severity + false alarms")
-    ap.add_argument("what", choices=("study",))
-    from hd_onboard.study_args import add_study_args
-
-    add_study_args(ap)
-    return run_study(ap.parse_args(argv))
-
-
-def run_study(a) -> int:
-    """Run the study for parsed :func:`add_study_args` options; print the table, write JSON + PNG."""
+def run_study(a, simulate: Callable) -> int:
+    """Run the study for parsed :func:`add_study_args` options; print the table, write JSON + PNG.
+    ``simulate``: as in :func:`study_calibration` (``hdphm onboard study`` passes the plant's)."""
     import sys
 
     kw = {}
@@ -490,12 +469,12 @@ def run_study(a) -> int:
         fa = evaluate_bags(a.healthy, config=cfg, progress=True, skip=ground) if a.healthy else None
         cache: dict = {}
         st = detection_study(n=a.n, actuator=a.actuator, pop_seed=a.pop_seed, seed0=a.seed0, config=cfg, progress=True,
-                             missions=cache)
+                             missions=cache, simulate=simulate)
         fa_g = st_g = None
         if ground:
             fa_g = evaluate_bags(a.healthy, ground=ground, config=cfg, progress=True) if a.healthy else None
             st_g = detection_study(n=a.n, actuator=a.actuator, pop_seed=a.pop_seed, seed0=a.seed0, config=cfg,
-                                   progress=True, ground=ground, missions=cache)
+                                   progress=True, ground=ground, missions=cache, simulate=simulate)
     except ValueError as e:
         print(f"onboard study: {e}", file=sys.stderr)
         return 2
@@ -517,7 +496,3 @@ def run_study(a) -> int:
             wrote.append(out / "detection_study_ground.png")
         print("wrote " + ", ".join(map(str, wrote)))
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -3,7 +3,7 @@
 
 
 def add_study_args(ap) -> None:
-    """The detection study's options (shared by ``python -m hd_onboard.evaluate study`` and ``hdphm onboard study``)."""
+    """The detection study's options (shared by ``python -m hdphm.onboard_study study`` and ``hdphm onboard study``)."""
     ap.add_argument("--healthy", nargs="*", default=[], help="healthy bags / dirs for the false-alarm count")
     ap.add_argument("--n", type=int, default=6, help="fault missions per case")
     ap.add_argument("--actuator", type=int, default=2, help="unit of the simulated population that gets the faults")

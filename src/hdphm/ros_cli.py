@@ -1077,7 +1077,7 @@ def _cmd_onboard_eval(args) -> int:
 
 
 def _cmd_onboard_study(args) -> int:
-    from hd_onboard.evaluate import run_study
+    from hdphm.onboard_study import run_study
 
     return run_study(args)
 
