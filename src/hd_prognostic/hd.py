@@ -61,7 +61,9 @@ class ActuatorData:
         if self.h_true is not None:
             d["h_true"] = self.h_true.tolist()
             d["h_fail"] = self.h_fail
-        return json.loads(json.dumps(d, default=float).replace("NaN", "null"))
+        from hd_bag.jsonsafe import json_safe
+
+        return json.loads(json.dumps(json_safe(d), default=float))
 
     @classmethod
     def from_json(cls, d: dict) -> "ActuatorData":

@@ -23,7 +23,6 @@ import array
 import contextlib
 import importlib
 import json
-import math
 import os
 import struct
 from pathlib import Path
@@ -536,22 +535,9 @@ def json_msg(obj: Any):
     """``std_msgs/msg/String`` carrying ``obj`` as JSON (NaN/inf written as null)."""
     from std_msgs.msg import String
 
-    return String(data=json.dumps(_json_safe(obj), sort_keys=True))
+    from hd_bag.jsonsafe import json_safe
 
-
-def _json_safe(o: Any) -> Any:
-    if isinstance(o, dict):
-        return {str(k): _json_safe(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_json_safe(v) for v in o]
-    if isinstance(o, (np.floating, float)):
-        f = float(o)
-        return f if math.isfinite(f) else None
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, np.ndarray):
-        return _json_safe(o.tolist())
-    return o
+    return String(data=json.dumps(json_safe(obj), sort_keys=True))
 
 
 #: Caps of :func:`parse_json_msg` (mission metadata, reports; the twin state has its own, larger cap).

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hd_bag.jsonsafe import json_safe
+
 from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout
 from .data import Dataset, DiscoveryError, dataset_from_missions
 
@@ -59,19 +61,6 @@ def expand_paths(paths: list[str]) -> list[Path]:
         else:
             raise DiscoveryError(f"{p}: no such bag file or directory")
     return out
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        v = float(x)
-        return v if np.isfinite(v) else None
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    return x
 
 
 def run_discovery(
@@ -172,7 +161,7 @@ def run_discovery(
         for r in results:
             if r.identifiable:
                 report.setdefault("plots", []).extend(plot_result(r, out, ds))
-    (out / "report.json").write_text(json.dumps(_jsonable(report), indent=2))
+    (out / "report.json").write_text(json.dumps(json_safe(report), indent=2))
     log(f"report: {out / 'report.json'}")
     return report
 
@@ -281,10 +270,10 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
             train_twin(missions, dst, TrainConfig(**{k: v for k, v in tc.items() if k in fields}))
             cfg2 = json.loads((dst / "config.json").read_text())
             cfg2["discovery"] = dict(cfg["discovery"], network="retrained with the new physics terms")
-            (dst / "config.json").write_text(json.dumps(_jsonable(cfg2), indent=2))
+            (dst / "config.json").write_text(json.dumps(json_safe(cfg2), indent=2))
             return dst
         except Exception as e:  # noqa: BLE001 - report, keep the recalibrated version
             log(f"retraining failed ({type(e).__name__}: {e}); writing the recalibrated physics only")
-    (dst / "config.json").write_text(json.dumps(_jsonable(cfg), indent=2))
+    (dst / "config.json").write_text(json.dumps(json_safe(cfg), indent=2))
     log(f"new twin version {cfg['model_version']} written to {dst}")
     return dst
