@@ -19,7 +19,11 @@ def find_bags(root: str | os.PathLike) -> list[Path]:
     root = Path(root)
     if not root.exists():
         raise ValueError(f"{root}: mission archive directory does not exist")
-    return sorted(p for p in root.rglob("*.mcap") if p.is_file())
+    if not root.is_dir():
+        return []
+    from hd_bag.files import find_bags as find
+
+    return find([root], files_only=True, empty_error=False)
 
 
 def load_archive(root: str | os.PathLike, log=None) -> dict[str, list]:

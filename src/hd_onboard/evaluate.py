@@ -39,18 +39,9 @@ from hd_onboard.detector import ERROR, WARN
 
 def collect_bags(paths: Iterable[str | os.PathLike]) -> list[str]:
     """MCAP files given directly or found (recursively) under directories, sorted; ValueError naming a missing path."""
-    out: list[str] = []
-    for p in paths:
-        p = Path(p)
-        if p.is_dir():
-            out += sorted(str(f) for f in p.rglob("*.mcap"))
-        elif p.is_file():
-            out.append(str(p))
-        else:
-            raise ValueError(f"{p}: no such bag file or directory")
-    if not out:
-        raise ValueError(f"no .mcap bags under {', '.join(map(str, paths))}")
-    return out
+    from hd_bag.files import find_bags
+
+    return [str(p) for p in find_bags(paths, sort_key=str)]
 
 
 def _margins(res: dict, core: OnboardCore) -> dict[str, float]:

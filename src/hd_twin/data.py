@@ -454,19 +454,11 @@ def file_sha256(path: str | Path, chunk: int = 1 << 20) -> str:
 
 
 def find_bags(paths: Iterable[str | Path]) -> list[Path]:
-    """Expand files and directories (recursively) into a sorted list of ``.mcap`` files."""
-    out: list[Path] = []
-    for p in paths:
-        p = Path(p)
-        if p.is_dir():
-            out += sorted(p.rglob("*.mcap"))
-        elif p.is_file():
-            out.append(p)
-        else:
-            raise ValueError(f"{p}: no such bag file or directory")
-    if not out:
-        raise ValueError(f"no .mcap bags found under {[str(p) for p in paths]}")
-    return sorted(set(out))
+    """Expand files and directories (recursively) into a sorted list of ``.mcap`` files (repeats dropped);
+    ValueError naming a missing path or when there is no bag (:func:`hd_bag.files.find_bags`)."""
+    from hd_bag.files import find_bags as find
+
+    return find(paths, unique="sorted")
 
 
 def windows(seg_lengths: Sequence[int], length: int, stride: int) -> list[tuple[int, int]]:

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
 from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout
@@ -48,19 +49,9 @@ def load_twin(model_dir: str | Path) -> dict:
 
 
 def expand_paths(paths: list[str]) -> list[Path]:
-    """Bag files from files and directories (``*.mcap``, sorted); errors name the path."""
-    out: list[Path] = []
-    for p in map(Path, paths):
-        if p.is_dir():
-            found = sorted(p.rglob("*.mcap"))
-            if not found:
-                raise DiscoveryError(f"{p}: directory holds no .mcap bag")
-            out += found
-        elif p.is_file():
-            out.append(p)
-        else:
-            raise DiscoveryError(f"{p}: no such bag file or directory")
-    return out
+    """Bag files from files and directories (``*.mcap``, sorted); errors name the path
+    (:func:`hd_bag.files.find_bags`)."""
+    return find_bags(paths, empty_dir_error=True, empty_error=False, error=DiscoveryError)
 
 
 def run_discovery(

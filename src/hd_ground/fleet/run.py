@@ -13,13 +13,11 @@ results of an actuator are recomputed whenever its stored missions changed.
 
 from __future__ import annotations
 
-import glob
 import json
 import os
 import sys
 import time
 from collections import defaultdict
-from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from hd_ground.fleet.store import FleetStore
@@ -29,19 +27,10 @@ from hd_ground.fleet.tasks import (FleetOptions, actuator_task, calibrate_task, 
 
 def expand_bags(specs: Iterable[str]) -> list[str]:
     """Bag files from paths, directories (searched recursively for ``*.mcap``) and glob patterns."""
-    out: list[str] = []
-    for s in specs:
-        hits = sorted(glob.glob(s, recursive=True)) if any(ch in s for ch in "*?[") else [s]
-        if not hits:
-            raise FileNotFoundError(f"{s}: no file matches")
-        for h in hits:
-            p = Path(h)
-            if p.is_dir():
-                out += sorted(str(x.absolute()) for x in p.rglob("*.mcap") if x.is_file())
-            elif p.is_file():
-                out.append(str(p.absolute()))
-            else:
-                raise FileNotFoundError(f"{h}: no such bag or directory")
+    from hd_bag.files import find_bags
+
+    found = find_bags(specs, patterns=True, files_only=True, sort_key=str, empty_error=False, error=FileNotFoundError)
+    out = [str(p.absolute()) for p in found]
     seen: set[str] = set()
     return [p for p in out if not (p in seen or seen.add(p))]
 
