@@ -1,11 +1,13 @@
-"""Finding bags: the one bag finder of the project (each caller picks its rules by parameters)."""
+"""Files: the one bag finder of the project (each caller picks its rules by parameters) and the one
+"read a JSON file or raise naming the path" helper."""
 
 from __future__ import annotations
 
 import glob
+import json
 import os
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 
 def find_bags(paths: Iterable[str | os.PathLike], *, patterns: bool = False, files_only: bool = False,
@@ -49,3 +51,18 @@ def find_bags(paths: Iterable[str | os.PathLike], *, patterns: bool = False, fil
     if empty_error and not out:
         raise error(f"no .mcap bags under {', '.join(map(str, paths))}")
     return out
+
+
+def read_json(path: str | os.PathLike, what: str, *, max_bytes: int | None = None) -> Any:
+    """The JSON content of ``path``; every error starts with the path and says what the file should be:
+    FileNotFoundError when it is absent, ValueError when it is larger than ``max_bytes``, not UTF-8 or
+    not JSON (other OSErrors, e.g. a directory, pass through)."""
+    p = Path(path)
+    try:
+        if max_bytes is not None and (size := p.stat().st_size) > max_bytes:
+            raise ValueError(f"{p}: {size} bytes is larger than the {max_bytes}-byte cap for {what}")
+        return json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{p}: {what} not found") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{p}: {what} is not valid JSON ({e})") from None

@@ -216,13 +216,10 @@ class ObservationModel:
 
     @classmethod
     def from_json(cls, path: str | Path) -> "ObservationModel":
+        from hd_bag.files import read_json
+
         p = Path(path)
-        try:
-            d = json.loads(p.read_text())
-        except FileNotFoundError:
-            raise FileNotFoundError(f"{p}: observation-model JSON not found") from None
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{p}: not valid JSON ({e})") from e
+        d = read_json(p, "observation-model JSON")
         if d.get("kind") != "hd_prognostic.ObservationModel":
             raise ValueError(f"{p}: not an hd_prognostic observation model (kind={d.get('kind')!r})")
         d.pop("kind", None)

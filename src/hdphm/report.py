@@ -46,13 +46,9 @@ def _read_json(path: Path) -> Any | None:
     """JSON content or None when absent; a file too big or not JSON raises ValueError naming it."""
     if not path.is_file():
         return None
-    size = path.stat().st_size
-    if size > MAX_JSON_BYTES:
-        raise ValueError(f"{path}: {size} bytes is larger than the report's {MAX_JSON_BYTES}-byte cap for a JSON file")
-    try:
-        return json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ValueError(f"{path}: not valid JSON ({e})") from e
+    from hd_bag.files import read_json
+
+    return read_json(path, "a report input", max_bytes=MAX_JSON_BYTES)
 
 
 def _finite(x) -> float | None:

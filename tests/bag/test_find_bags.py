@@ -41,3 +41,17 @@ def test_errors_name_the_path(tree):
     assert find_bags([tree / "empty"], empty_error=False) == []
     with pytest.raises(ValueError, match=r"\*.zzz: no file matches"):
         find_bags([str(tree / "*.zzz")], patterns=True)
+
+
+def test_read_json_names_the_path(tmp_path):
+    from hd_bag.files import read_json
+
+    (tmp_path / "ok.json").write_text('{"a": 1}')
+    assert read_json(tmp_path / "ok.json", "a thing") == {"a": 1}
+    with pytest.raises(FileNotFoundError, match="gone.json: a thing not found"):
+        read_json(tmp_path / "gone.json", "a thing")
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(ValueError, match="bad.json: a thing is not valid JSON"):
+        read_json(tmp_path / "bad.json", "a thing")
+    with pytest.raises(ValueError, match=r"ok.json: 8 bytes is larger than the 4-byte cap"):
+        read_json(tmp_path / "ok.json", "a thing", max_bytes=4)

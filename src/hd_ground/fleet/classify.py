@@ -226,10 +226,9 @@ def load_classifier(path: str | None = None) -> GaussianFaultClassifier | None:
         if path:
             raise FileNotFoundError(f"{p}: fault classifier file not found")
         return None
-    try:
-        d = json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{p}: fault classifier is not JSON ({e})") from None
+    from hd_bag.files import read_json
+
+    d = read_json(p, "fault classifier")
     return GaussianFaultClassifier.from_json(d, str(p))
 
 
