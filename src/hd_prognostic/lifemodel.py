@@ -494,11 +494,14 @@ class LifeModel:
     @classmethod
     def from_json(cls, src) -> "LifeModel":
         if not isinstance(src, dict):
+            from hd_bag.files import read_json
+
             p = Path(src)
             try:
-                src = json.loads(p.read_text())
-            except (OSError, json.JSONDecodeError) as e:
-                raise ValueError(f"{p}: not a readable life-model JSON ({e})") from e
+                src = read_json(p, "life-model JSON")
+            except OSError as e:  # absent, a directory, unreadable: ValueError as before, naming the path
+                raise ValueError(str(e) if isinstance(e, FileNotFoundError)
+                                 else f"{p}: not a readable life-model JSON ({e})") from e
             if src.get("kind") != "hdphm life model v1":
                 raise ValueError(f"{p}: not a life model written by 'hdphm prognostic fit' (kind {src.get('kind')!r})")
         return cls(src["theta"], src["E_ref"], src.get("exposure", "missions"), src.get("feature", "hi"),
