@@ -52,7 +52,8 @@ ALLOWED_UPWARD: set[tuple[str, str]] = {
     ("hd_onboard.node", "hdphm.rosutil"), ("hd_onboard.node", "hdphm.managed"),
     ("hd_prognostic.node", "hdphm.rosutil"), ("hd_prognostic.node", "hdphm.managed"),
     ("hd_ground.node", "hdphm.rosutil"), ("hd_ground.node", "hdphm.managed"),
-    # R2: the twin node borrows the onboard node's helpers and the detector's reference parser
+    # R2: the twin node borrows the onboard node's helpers and validates states with the detector's
+    #     ChannelThreshold / StiffnessReference / FrictionReference (validation moves to hd_twin/state.py)
     ("hd_twin.node", "hd_onboard.node"), ("hd_twin.node", "hd_onboard.detector"),
     # R3: onboard self-calibration and evaluation use the ground's threshold / reference code
     ("hd_onboard.detector", "hd_ground.thresholds"), ("hd_onboard.evaluate", "hd_ground.thresholds"),
