@@ -1,6 +1,6 @@
 """The twin model directory: its format, save/load, the one ``config.json`` reader, prediction.
 
-A model directory (written by :func:`save_model` for :func:`hd_twin.train.train_twin`)::
+A model directory (written by :func:`write_model` + :func:`hd_twin.train.save_model`)::
 
     config.json          inputs, features, outputs, declared effects, extra_terms,
                          physical parameters, model_version, preprocessing,
@@ -11,14 +11,13 @@ A model directory (written by :func:`save_model` for :func:`hd_twin.train.train_
 
 Every reader of a model's ``config.json`` (training/evaluation, ONNX runtime, twin node,
 ``hdphm twin show``, ground discovery) goes through :func:`read_config`. This module sits
-below :mod:`hd_twin.train`, :mod:`hd_twin.export` and :mod:`hd_twin.plots` (it imports them
-only inside :func:`save_model`, never ``train``), so those no longer import each other in a circle.
+below :mod:`hd_twin.train`, :mod:`hd_twin.export` and :mod:`hd_twin.plots` and imports none of
+them, so those no longer import each other in a circle.
 """
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -51,10 +50,11 @@ def read_config(model_dir: str | Path, *, check_format: bool = False) -> dict[st
 
 
 # ---- save / load ------------------------------------------------------------------
-def save_model(result, cfg, progress: bool = True) -> None:
-    """Write a trained model directory: ``model.pt``, ``config.json`` (``result.config``), ``history.json``,
-    ``twin.onnx`` (``cfg.export_onnx``), ``metrics.json`` and the figures (``cfg.plots``);
-    ``result`` a :class:`hd_twin.train.TrainResult`, ``cfg`` its :class:`hd_twin.train.TrainConfig`."""
+def write_model(result) -> Path:
+    """Write the data files of a trained model directory ``result.model_dir``: ``model.pt``,
+    ``config.json`` (``result.config``), ``history.json``, ``metrics.json``; ``result`` a
+    :class:`hd_twin.train.TrainResult`. The ONNX export and the figures are added by
+    :func:`hd_twin.train.save_model`. Returns the directory."""
     import torch
 
     out = Path(result.model_dir)
@@ -62,19 +62,8 @@ def save_model(result, cfg, progress: bool = True) -> None:
     torch.save(result.pinn.state_dict(), out / "model.pt")
     (out / CONFIG_NAME).write_text(json.dumps(result.config, indent=2))
     (out / "history.json").write_text(json.dumps(result.history))
-    if cfg.export_onnx:
-        from .export import export_onnx
-
-        export_onnx(out)
     (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2))
-    if cfg.plots:
-        from .plots import plot_training
-
-        tr, va = result.segments
-        outs = getattr(result, "outputs", None)
-        plot_training(out, result.pinn, result.norm, tr, va, result.history, outs=outs)
-    if progress:
-        print(f"model written to {out}", file=sys.stderr)
+    return out
 
 
 def load_pinn(model_dir: str | Path):

@@ -32,7 +32,7 @@ import numpy as np
 from . import data as D
 from . import physics as ph
 from .modeldir import (MODEL_FORMAT, _device_of, load_pinn, predict_outputs, predict_segments,  # noqa: F401 (re-exported)
-                       q_from_outputs, read_config, save_model, segment_phys)
+                       q_from_outputs, read_config, segment_phys, write_model)
 from .physpath import PhysicsPath, choose_gate
 
 _CR = "\r" if sys.stderr.isatty() else ""  # overwrite progress lines on a terminal only
@@ -227,6 +227,24 @@ def _to_torch(batch: dict, sel=None, device=None) -> dict:
 
     out = {k: torch.from_numpy(v if sel is None else v[sel]) for k, v in batch.items()}
     return out if device is None or str(device) == "cpu" else {k: v.to(device) for k, v in out.items()}
+
+
+def save_model(result: TrainResult, cfg: TrainConfig, progress: bool = True) -> None:
+    """Write the model directory: the data files (:func:`hd_twin.modeldir.write_model`), then
+    ``twin.onnx`` (``cfg.export_onnx``) and the figures (``cfg.plots``)."""
+    out = write_model(result)
+    if cfg.export_onnx:
+        from .export import export_onnx
+
+        export_onnx(out)
+    if cfg.plots:
+        from .plots import plot_training
+
+        tr, va = result.segments
+        outs = getattr(result, "outputs", None)
+        plot_training(out, result.pinn, result.norm, tr, va, result.history, outs=outs)
+    if progress:
+        print(f"model written to {out}", file=sys.stderr)
 
 
 # ---- evaluation ------------------------------------------------------------------

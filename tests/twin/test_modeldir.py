@@ -55,3 +55,4 @@ def test_no_train_export_plots_circle():
     for name in ("modeldir.py", "export.py", "plots.py"):
         imp = _imports(name)
         assert ".train" not in imp and "hd_twin.train" not in imp, name
+    assert not {".export", ".plots", "hd_twin.export", "hd_twin.plots"} & _imports("modeldir.py")
