@@ -6,7 +6,8 @@ known (or assumed) healthy:
 * ``mu`` = median, ``sigma`` = 1.4826 MAD (robust: a few transients do not
   inflate the scale), both in the channel's unit;
 * the EWMA ``e`` of the normalised residual is run exactly as onboard
-  (:func:`hd_onboard.detector.ewma`, same time constant), and its
+  (:func:`hd_onboard.detector.ewma`, same time constant; the arithmetic is
+  :func:`hd_onboard.detector.robust_threshold`, shared with the onboard self-calibration), and its
   *persistent peak* is taken: the largest value that |e| held for the
   onboard persistence time (a sliding minimum over P samples, then the max);
 * ``h_warn = max(min_h_warn, warn_margin * peak)``,
@@ -25,22 +26,11 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from hd_onboard.detector import ChannelThreshold, ewma
+from hd_onboard.detector import ChannelThreshold, persistent_peak, robust_threshold
+
+__all__ = ["MIN_SAMPLES", "persistent_peak", "channel_threshold", "actuator_thresholds"]
 
 MIN_SAMPLES = 200
-
-
-def persistent_peak(a: np.ndarray, p: int) -> float:
-    """max over k of min(a[k:k+p]) (NaN ignored: they break the run)."""
-    a = np.where(np.isfinite(a), a, -np.inf)
-    if len(a) == 0:
-        return 0.0
-    p = max(1, min(int(p), len(a)))
-    if p == 1:
-        v = float(np.max(a))
-    else:
-        v = float(np.lib.stride_tricks.sliding_window_view(a, p).min(axis=1).max())
-    return v if np.isfinite(v) else 0.0
 
 
 def channel_threshold(segments: Iterable[np.ndarray], *, fs: float, ewma_tau_s: float = 0.1,
@@ -51,33 +41,12 @@ def channel_threshold(segments: Iterable[np.ndarray], *, fs: float, ewma_tau_s: 
 
     ``fs`` [Hz] sample rate of the residuals; returns None when fewer than
     ``MIN_SAMPLES`` finite residuals are available (the caller keeps its
-    previous lines).
+    previous lines). The arithmetic is :func:`hd_onboard.detector.robust_threshold`
+    (the same function the onboard self-calibration runs), with no scale floor.
     """
-    segs = [np.asarray(s, dtype=float) for s in segments]
-    allr = np.concatenate(segs) if segs else np.empty(0)
-    fin = allr[np.isfinite(allr)]
-    if len(fin) < MIN_SAMPLES:
-        return None
-    if not (np.isfinite(fs) and fs > 0):
-        raise ValueError(f"thresholds: sample rate {fs!r} Hz is not positive")
-    mu = float(np.median(fin))
-    sigma = float(1.4826 * np.median(np.abs(fin - mu)))
-    if not sigma > 0:
-        sigma = float(np.std(fin)) or 1e-12
-    lam = min(1.0, 1.0 / (ewma_tau_s * fs))
-    p = max(1, int(round(persistence_s * fs)))
-    peak = 0.0
-    for s in segs:
-        if np.isfinite(s).sum() < 2:
-            continue
-        e = ewma((s - mu) / sigma, lam, 0.0)
-        e = np.where(np.isfinite(s), np.abs(e), np.nan)
-        # skip the EWMA start-up (one time constant): it starts from 0, not from the data
-        e[: int(ewma_tau_s * fs)] = np.nan
-        peak = max(peak, persistent_peak(e, p))
-    h_warn = max(min_h_warn, warn_margin * peak)
-    h_error = max(min_h_error, error_margin * peak, 1.5 * h_warn)
-    return ChannelThreshold(mu, sigma, float(h_warn), float(h_error), source).validate("thresholds")
+    return robust_threshold(segments, fs=fs, ewma_tau_s=ewma_tau_s, persistence_s=persistence_s,
+                            warn_margin=warn_margin, error_margin=error_margin, min_h_warn=min_h_warn,
+                            min_h_error=min_h_error, source=source, min_samples=MIN_SAMPLES, where="thresholds")
 
 
 def actuator_thresholds(results: Sequence[dict], *, channels: Sequence[str] = ("Q_red", "twist"),

@@ -52,12 +52,12 @@ def _margins(res: dict, core: OnboardCore) -> dict[str, float]:
         e = e[np.isfinite(e)]
         out[c] = float(e.max() / core.thresholds[c].h_warn) if len(e) else math.nan
     if tab.shape[1] > 8:  # stiffness: largest loss held for the persistence time / loss_warn
-        from hd_ground.thresholds import persistent_peak
+        from hd_onboard.detector import persistent_peak
 
         sm = core.stiffness
         out["stiffness"] = float(persistent_peak(tab[:, 8], sm.persistence) / sm.loss_warn) if np.isfinite(tab[:, 8]).any() else math.nan
     if tab.shape[1] > 9:  # friction: largest excess held for the persistence time / excess_warn
-        from hd_ground.thresholds import persistent_peak
+        from hd_onboard.detector import persistent_peak
 
         fm = core.friction
         out["friction"] = (float(persistent_peak(tab[:, 9], fm.persistence) / fm.excess_warn)

@@ -138,10 +138,12 @@ def _export(args) -> int:
 
 def _show(args) -> int:
     d = Path(args.model)
+    from .modeldir import read_config
+
     try:
-        cfg = json.loads((d / "config.json").read_text())
-    except FileNotFoundError:
-        raise SystemExit(f"{d}: not a twin model directory") from None
+        cfg = read_config(d)
+    except ValueError as e:
+        raise SystemExit(str(e)) from None
     met = json.loads((d / "metrics.json").read_text()) if (d / "metrics.json").exists() else {}
     print(f"model {d}  version {cfg['model_version']}  arch {cfg['arch']}")
     print(f"declared effects: {cfg['declared_effects']}  extra terms: {len(cfg.get('extra_terms', []))}")

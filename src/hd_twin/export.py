@@ -21,7 +21,7 @@ def export_onnx(model_dir: str | Path, out_path: str | Path | None = None) -> Pa
     import torch
 
     from .model import StreamWrapper
-    from .train import load_pinn
+    from .modeldir import load_pinn
 
     model_dir = Path(model_dir)
     pinn, _norm, cfg = load_pinn(model_dir)

@@ -57,13 +57,10 @@ def initial_state(model_dir: str = "", params_file: str = "") -> dict:
     if model_dir:
         from pathlib import Path
 
-        cfgp = Path(model_dir) / "config.json"
-        try:
-            cfg = json.loads(cfgp.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"{cfgp}: twin model directory has no config.json") from None
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{cfgp}: not valid JSON ({e})") from None
+        from hd_twin.modeldir import CONFIG_NAME, read_config
+
+        cfgp = Path(model_dir) / CONFIG_NAME
+        cfg = read_config(model_dir)
         if isinstance(cfg.get("params"), dict) and not params_file:
             params = ph.TwinParams.from_dict({k: v for k, v in cfg["params"].items() if k in ph.TwinParams.__dataclass_fields__ or k in ("mu_g", "K_out")}, str(cfgp))
         state["model_version"] = str(cfg.get("version") or cfg.get("model_version") or Path(model_dir).name)

@@ -94,12 +94,12 @@ def plot_training(out: Path, pinn, norm, tr_segs: Sequence, va_segs: Sequence, h
     reused instead of predicting again."""
     out = Path(out)
     if outs is not None:
-        from .train import q_from_outputs  # noqa: PLC0415
+        from .modeldir import q_from_outputs  # noqa: PLC0415
 
         ptr = q_from_outputs(pinn, tr_segs[:3], outs[0][:3])
         pva = q_from_outputs(pinn, va_segs, outs[1])
     else:
-        from .train import predict_segments  # noqa: PLC0415
+        from .modeldir import predict_segments  # noqa: PLC0415
 
         ptr = predict_segments(pinn, tr_segs[:3], norm)
         pva = predict_segments(pinn, va_segs, norm)

@@ -24,7 +24,6 @@ whole segment in one call equals batch exactly).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -43,10 +42,9 @@ class StreamingTwin:
         import onnxruntime as ort
 
         self.model_dir = Path(model_dir)
-        try:
-            self.config = json.loads((self.model_dir / "config.json").read_text())
-        except FileNotFoundError:
-            raise ValueError(f"{self.model_dir}: not a twin model directory (no config.json)") from None
+        from .modeldir import read_config
+
+        self.config = read_config(self.model_dir)
         onnx_path = self.model_dir / "twin.onnx"
         if not onnx_path.is_file():
             raise ValueError(f"{onnx_path}: missing; run `hdphm twin export {self.model_dir}`")

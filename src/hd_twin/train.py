@@ -1,4 +1,4 @@
-"""Training of the physics-informed LSTM twin and the model directory it writes.
+"""Training of the physics-informed LSTM twin (the model directory it writes: :mod:`hd_twin.modeldir`).
 
 ``train_twin(missions, out_dir, cfg)`` is the pure core used by ``hdphm
 train``, ``hdphm tune`` and the ablation; it takes :class:`Mission` objects
@@ -20,7 +20,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import hashlib
-import json
 import math
 import sys
 import time
@@ -32,9 +31,10 @@ import numpy as np
 
 from . import data as D
 from . import physics as ph
+from .modeldir import (MODEL_FORMAT, _device_of, load_pinn, predict_outputs, predict_segments,  # noqa: F401 (re-exported)
+                       q_from_outputs, read_config, segment_phys, write_model)
 from .physpath import PhysicsPath, choose_gate
 
-MODEL_FORMAT = "hd_twin/1"
 _CR = "\r" if sys.stderr.isatty() else ""  # overwrite progress lines on a terminal only
 
 #: Physical parameters the PINN identifies by default (those the data constrain: the
@@ -229,64 +229,25 @@ def _to_torch(batch: dict, sel=None, device=None) -> dict:
     return out if device is None or str(device) == "cpu" else {k: v.to(device) for k, v in out.items()}
 
 
+def save_model(result: TrainResult, cfg: TrainConfig, progress: bool = True) -> None:
+    """Write the model directory: the data files (:func:`hd_twin.modeldir.write_model`), then
+    ``twin.onnx`` (``cfg.export_onnx``) and the figures (``cfg.plots``)."""
+    out = write_model(result)
+    if cfg.export_onnx:
+        from .export import export_onnx
+
+        export_onnx(out)
+    if cfg.plots:
+        from .plots import plot_training
+
+        tr, va = result.segments
+        outs = getattr(result, "outputs", None)
+        plot_training(out, result.pinn, result.norm, tr, va, result.history, outs=outs)
+    if progress:
+        print(f"model written to {out}", file=sys.stderr)
+
+
 # ---- evaluation ------------------------------------------------------------------
-def _device_of(pinn):
-    return next(pinn.parameters()).device
-
-
-def segment_phys(pinn, segs: Sequence[D.Segment]) -> list[np.ndarray]:
-    """The physics path per segment (cached on the segment; zeros without one)."""
-    out = []
-    for s in segs:
-        if s.Q_phys is None or len(s.Q_phys) != s.n:
-            s.Q_phys = pinn.physpath.predict_segment(s)
-        out.append(s.Q_phys)
-    return out
-
-
-def predict_outputs(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, batch_samples: int = 1 << 20) -> list[np.ndarray]:
-    """Raw network outputs [n, n_out] per segment, full sequences from a zero state (as streaming).
-
-    Vectorised: segments sorted by length and run as padded batches (the LSTM is causal, so padding
-    after a segment's end never changes its outputs) on the model's device, under autocast on CUDA;
-    ``batch_samples`` bounds the padded samples per batch.
-    """
-    import torch
-
-    pinn.eval()
-    dev = _device_of(pinn)
-    out: list[np.ndarray | None] = [None] * len(segs)
-    order = sorted(range(len(segs)), key=lambda i: segs[i].n, reverse=True)
-    k = 0
-    with torch.no_grad():
-        while k < len(order):
-            L = segs[order[k]].n
-            nb = max(1, min(len(order) - k, batch_samples // max(L, 1)))
-            idx = order[k:k + nb]
-            x = np.zeros((nb, L, len(norm.f_mean)), np.float32)
-            for j, i in enumerate(idx):
-                z = norm.norm_features(segs[i].F)
-                x[j, :len(z)] = z
-                x[j, len(z):] = z[-1]
-            y, _ = pinn.forward_net(torch.from_numpy(x).to(dev))
-            y = y.float().cpu().numpy()
-            for j, i in enumerate(idx):
-                out[i] = y[j, :segs[i].n].astype(np.float64)
-            k += nb
-    return out  # type: ignore[return-value]
-
-
-def q_from_outputs(pinn, segs: Sequence[D.Segment], outs: Sequence[np.ndarray], gate: float | None = None) -> list[np.ndarray]:
-    """The twin's Q_red [N*m] per segment: physics path + gate x remainder."""
-    g = float(pinn.gate) if gate is None else float(gate)
-    return [qp + g * (pinn.r_mean + pinn.r_std * o[:, 0]) for qp, o in zip(segment_phys(pinn, segs), outs)]
-
-
-def predict_segments(pinn, segs: Sequence[D.Segment], norm: D.Normalizer) -> list[np.ndarray]:
-    """Full-sequence Q_red prediction [N*m] per segment (zero initial state, as streaming)."""
-    return q_from_outputs(pinn, segs, predict_outputs(pinn, segs, norm))
-
-
 def q_metrics(y_true: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
     """NRMSE (RMSE / range of the true signal, %), R^2, max abs error [N*m], RMSE [N*m]."""
     ok = np.isfinite(y_true) & np.isfinite(y_pred)
@@ -621,68 +582,6 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     if out_dir is not None:
         save_model(result, cfg, progress=progress)
     return result
-
-
-def save_model(result: TrainResult, cfg: TrainConfig, progress: bool = True) -> None:
-    import torch
-
-    out = Path(result.model_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    torch.save(result.pinn.state_dict(), out / "model.pt")
-    (out / "config.json").write_text(json.dumps(result.config, indent=2))
-    (out / "history.json").write_text(json.dumps(result.history))
-    if cfg.export_onnx:
-        from .export import export_onnx
-
-        export_onnx(out)
-    (out / "metrics.json").write_text(json.dumps(result.metrics, indent=2))
-    if cfg.plots:
-        from .plots import plot_training
-
-        tr, va = result.segments
-        outs = getattr(result, "outputs", None)
-        plot_training(out, result.pinn, result.norm, tr, va, result.history, outs=outs)
-    if progress:
-        print(f"model written to {out}", file=sys.stderr)
-
-
-def load_pinn(model_dir: str | Path):
-    """(PINN in eval mode, Normalizer, config dict) from a model directory."""
-    import torch
-
-    from .model import LossConfig, PINN, TwinLSTM
-
-    model_dir = Path(model_dir)
-    try:
-        cfgd = json.loads((model_dir / "config.json").read_text())
-    except FileNotFoundError:
-        raise ValueError(f"{model_dir}: not a twin model directory (no config.json)") from None
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{model_dir / 'config.json'}: corrupt JSON ({e})") from None
-    if cfgd.get("format") != MODEL_FORMAT:
-        raise ValueError(f"{model_dir}: model format {cfgd.get('format')!r}, expected {MODEL_FORMAT!r}")
-    a, t = cfgd["arch"], cfgd["train"]
-    params = ph.TwinParams.from_dict(cfgd["params"], f"{model_dir}/config.json params")
-    norm = D.Normalizer.from_dict(cfgd["normalization"])
-    net = TwinLSTM(len(cfgd["features"]), len(cfgd["outputs"]), a["hidden"], a["layers"], a["dropout"], a.get("skip", False))
-    lcfg = LossConfig(lambda_mode=t["lambda_mode"], lambda_init=t["lambda_init"], adaptive_scaling=t["adaptive_scaling"],
-                      ramp_epochs=t["ramp_epochs"], washout=t["washout"])
-    pp = cfgd.get("physics_path")
-    r_mean, r_std = cfgd["output_scales"]["Q_red"]
-    pinn = PINN(net, params, cfgd["declared_effects"], norm.q_mean, norm.q_std, lcfg, cfgd.get("extra_terms", []),
-                t.get("calibrate", []), t.get("calib_reg", 1e-2), physpath=PhysicsPath.from_dict(pp),
-                r_mean=r_mean, r_std=r_std)
-    try:
-        sd = torch.load(model_dir / "model.pt", weights_only=True)
-    except FileNotFoundError:
-        raise ValueError(f"{model_dir}: model.pt missing") from None
-    missing, unexpected = pinn.load_state_dict(sd, strict=False)
-    if "gate" in missing and pp:
-        pinn.gate.fill_(float(pp.get("gate", 1.0)))
-    if unexpected or set(missing) - {"calib", "lam.s_d", "gate"}:  # older models lack these (defaults reproduce them)
-        raise ValueError(f"{model_dir}/model.pt does not match config.json (missing {missing}, unexpected {unexpected})")
-    pinn.eval()
-    return pinn, norm, cfgd
 
 
 #: |z| of a normalised network feature beyond which a sample is outside the training data.

@@ -54,6 +54,55 @@ def test_persistent_peak():
     assert persistent_peak(a, 1) == 5 and persistent_peak(a, 3) == 3
 
 
+def _old_threshold_arithmetic(segs, fs, tau, pers, wm, em, hw, he, floor=0.0):
+    """The arithmetic both former copies (ground channel_threshold, onboard calibrate_channel) ran."""
+    from hd_onboard.detector import ewma
+    fin = np.concatenate(segs)
+    fin = fin[np.isfinite(fin)]
+    mu = float(np.median(fin))
+    sigma = float(1.4826 * np.median(np.abs(fin - mu)))
+    sigma = max(sigma, floor)
+    lam = min(1.0, 1.0 / (tau * fs))
+    peak = 0.0
+    for s in segs:
+        e = ewma((s - mu) / sigma, lam, 0.0)
+        e = np.where(np.isfinite(s), np.abs(e), np.nan)
+        e[: int(tau * fs)] = np.nan
+        peak = max(peak, persistent_peak(e, max(1, int(round(pers * fs)))))
+    h_warn = max(hw, wm * peak)
+    return mu, sigma, h_warn, max(he, em * peak, 1.5 * h_warn)
+
+
+def test_onboard_and_ground_thresholds_are_one_function():
+    """Self-calibration (one warm-up segment) and ground thresholds give identical lines on the same
+    data, equal to the arithmetic both ran before they were merged; the scale floor is onboard-only."""
+    from hd_onboard.detector import calibrate_channel
+
+    rng = np.random.default_rng(7)
+    r = 0.3 + 0.05 * rng.standard_t(4, 3000)
+    r[100:110] = np.nan
+    r[2000:2300] += 0.4  # a transient: the peak must come from it
+    kw = dict(fs=1000.0, ewma_tau_s=0.1, persistence_s=0.05, warn_margin=1.5, error_margin=3.0,
+              min_h_warn=3.0, min_h_error=6.0)
+    g = channel_threshold([r], **kw)
+    o = calibrate_channel(r, **kw)
+    got_g = (g.mu, g.sigma, g.h_warn, g.h_error)
+    assert got_g == (o.mu, o.sigma, o.h_warn, o.h_error)
+    ref = _old_threshold_arithmetic([r], 1000.0, 0.1, 0.05, 1.5, 3.0, 3.0, 6.0)
+    assert np.allclose(got_g, ref, rtol=1e-12, atol=0)
+    assert g.h_warn > 3.0  # the transient lifted the line above the floor value
+    # several segments (ground): pooled mu/sigma, largest per-segment peak
+    r2 = 0.3 + 0.05 * rng.standard_normal(1500)
+    g2 = channel_threshold([r, r2], **kw)
+    assert np.allclose((g2.mu, g2.sigma, g2.h_warn, g2.h_error),
+                       _old_threshold_arithmetic([r, r2], 1000.0, 0.1, 0.05, 1.5, 3.0, 3.0, 6.0), rtol=1e-12, atol=0)
+    # the floor (onboard): sigma raised, lines from the floored scale
+    o2 = calibrate_channel(r, sigma_floor=1.0, **kw)
+    assert o2.sigma == 1.0 and "sigma floor" in o2.source
+    assert np.allclose((o2.mu, o2.sigma, o2.h_warn, o2.h_error),
+                       _old_threshold_arithmetic([r], 1000.0, 0.1, 0.05, 1.5, 3.0, 3.0, 6.0, floor=1.0), rtol=1e-12, atol=0)
+
+
 def test_healthy_no_flag_fault_flags_quickly():
     h = run_mission(make_mission(seed=2))
     assert h["max_level"] == OK and h["onset_s"] is None

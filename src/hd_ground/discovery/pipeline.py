@@ -29,13 +29,13 @@ REPORT_FORMAT = "hdphm-discovery/1"
 
 def load_twin(model_dir: str | Path) -> dict:
     """The twin's config.json as a dict (declared_effects, params, extra_terms, model_version)."""
-    p = Path(model_dir) / "config.json"
+    from hd_twin.modeldir import CONFIG_NAME, read_config
+
+    p = Path(model_dir) / CONFIG_NAME
     try:
-        cfg = json.loads(p.read_text())
-    except FileNotFoundError:
-        raise DiscoveryError(f"{model_dir}: not a twin model directory (no config.json)") from None
-    except json.JSONDecodeError as e:
-        raise DiscoveryError(f"{p}: corrupt JSON ({e})") from None
+        cfg = read_config(model_dir)
+    except ValueError as e:
+        raise DiscoveryError(str(e)) from None
     if not isinstance(cfg.get("declared_effects", []), list):
         raise DiscoveryError(f"{p}: declared_effects must be a list")
     from hd_twin.terms import validate_term
@@ -259,7 +259,9 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
             fields = TrainConfig.__dataclass_fields__
             log("retraining the twin with the new effects (hd_twin.train.train_twin) ...")
             train_twin(missions, dst, TrainConfig(**{k: v for k, v in tc.items() if k in fields}))
-            cfg2 = json.loads((dst / "config.json").read_text())
+            from hd_twin.modeldir import read_config
+
+            cfg2 = read_config(dst)
             cfg2["discovery"] = dict(cfg["discovery"], network="retrained with the new physics terms")
             (dst / "config.json").write_text(json.dumps(json_safe(cfg2), indent=2))
             return dst
