@@ -95,57 +95,51 @@ def _actuator(view: RunView, aid: str) -> ActuatorView:
 
 
 def _ground_reports(stack_dir: Path, limit: int = 2000) -> list[dict]:
-    """The ground node's JSON reports from the recorded stack MCAPs (std_msgs/String on /hd/ground/report)."""
+    """The ground node's JSON reports from the recorded stack MCAPs (std_msgs/String on /hd/ground/report),
+    decoded by the bag layer's reader (its size caps and fixed type table apply)."""
+    from hd_bag.reader import iter_messages
+
     out: list[dict] = []
-    try:
-        from mcap.reader import make_reader
-    except ImportError:  # pragma: no cover - mcap is a dependency
-        return out
     for p in sorted(stack_dir.glob("*.mcap")):
         try:
-            with open(p, "rb") as f:
-                reader = make_reader(f)
-                for _schema, _channel, msg in reader.iter_messages(topics=["/hd/ground/report"]):
-                    # std_msgs/String in CDR: 4-byte encapsulation header, uint32 length, bytes (NUL-terminated)
-                    data = msg.data
-                    if len(data) < 8:
-                        continue
-                    n = int.from_bytes(data[4:8], "little")
-                    if n <= 0 or 8 + n > len(data):
-                        continue
-                    try:
-                        out.append(json.loads(data[8:8 + n].rstrip(b"\0").decode("utf-8")))
-                    except (UnicodeDecodeError, json.JSONDecodeError):
-                        continue
-                    if len(out) >= limit:
-                        return out
-        except Exception as e:  # a damaged recording loses its reports on the page, not the page
+            for _topic, _stamp, _log, msg in iter_messages(p, topics=["/hd/ground/report"], ros=False):
+                try:
+                    out.append(json.loads(msg.data))
+                except (AttributeError, TypeError, json.JSONDecodeError):
+                    continue
+                if len(out) >= limit:
+                    return out
+        except Exception as e:  # noqa: BLE001 - a damaged recording loses its reports on the page, not the page
             out.append({"_error": f"{p.name}: {type(e).__name__}: {e}"})
     return out
 
 
 def _recalibrations_from(reports: list[dict]) -> dict[str, list[dict]]:
+    """Per actuator, one row per ground analysis that recalibrated: the report's ``recalibration``
+    (one least-squares fit over the healthy missions of every actuator in that analysis: estimates,
+    rms before/after) attributed to each actuator the analysis covered."""
     per: dict[str, list[dict]] = {}
     for i, rep in enumerate(reports):
-        acts = rep.get("actuators") if isinstance(rep, dict) else None
-        if not isinstance(acts, dict):
+        if not isinstance(rep, dict):
             continue
-        for aid, a in acts.items():
-            if not isinstance(a, dict):
-                continue
-            rec = a.get("recalibration") or {}
-            row = {"analysis": i, "missions": a.get("missions")}
-            est = rec.get("estimates") if isinstance(rec, dict) else None
-            if isinstance(est, dict):
-                for k, v in est.items():
-                    fv = _finite(v)
-                    if fv is not None:
-                        row[k] = fv
-            for k in ("rms_before", "rms_after"):
-                fv = _finite(rec.get(k)) if isinstance(rec, dict) else None
+        acts = rep.get("actuators")
+        rec = rep.get("recalibration")
+        if not isinstance(acts, dict) or not isinstance(rec, dict) or "estimates" not in rec:
+            continue
+        row: dict[str, Any] = {"analysis": i}
+        est = rec.get("estimates")
+        if isinstance(est, dict):
+            for k, v in est.items():
+                fv = _finite(v)
                 if fv is not None:
                     row[k] = fv
-            per.setdefault(str(aid), []).append(row)
+        for k in ("rms_before", "rms_after"):
+            fv = _finite(rec.get(k))
+            if fv is not None:
+                row[k] = fv
+        for aid, a in acts.items():
+            per.setdefault(str(aid), []).append({**row, "missions": len(a.get("missions") or [])
+                                                 if isinstance(a, dict) else 0})
     return per
 
 
@@ -397,7 +391,8 @@ def _recal_figure(av: ActuatorView):
     for k in keys:
         fig.add_trace(go.Scatter(x=[r["analysis"] for r in av.recalibrations if k in r],
                                  y=[r[k] for r in av.recalibrations if k in r], mode="lines+markers", name=k))
-    fig.update_layout(height=260, margin={"l": 50, "r": 20, "t": 30, "b": 40}, title="recalibration history",
+    fig.update_layout(height=260, margin={"l": 50, "r": 20, "t": 30, "b": 40},
+                      title="recalibration history (each ground analysis: one fit over the analysed actuators)",
                       xaxis_title="ground analysis #")
     return fig
 

@@ -71,3 +71,33 @@ def test_report_of_a_fleet_store(small_fleet_dir, tmp_path):
     assert view.kind == "fleet store" and view.actuators["EMA-0002"].missions == len(bags)
     page = write_report(store, tmp_path / "fleet.html").read_text()
     assert "<a href='#act-EMA-0002'>EMA-0002</a>" in page
+
+
+def test_recalibration_history_from_recorded_ground_reports(demo_like_run, tmp_path):
+    """The ground node's reports (recalibration at report level, as hd_ground.node.analyse_archive writes
+    it) are read from a recorded stack MCAP and shown per analysed actuator."""
+    import json
+    import shutil
+
+    from mcap_ros2.writer import Writer as Ros2Writer
+
+    run = tmp_path / "run"
+    shutil.copytree(demo_like_run, run)
+    sd = run / "stack_EMA-B"
+    sd.mkdir()
+    reports = [{"archive_dir": "a", "actuators": {"EMA-A": {"missions": [0, 1]}, "EMA-B": {"missions": [0, 1, 2]}},
+                "recalibration": {"estimates": {"T_C": 0.10 + 0.01 * k, "b_visc": 2e-4}, "rows": 3000,
+                                  "rms_before": 0.3, "rms_after": 0.2}} for k in range(2)]
+    reports.append({"actuators": {"EMA-B": {"missions": [0]}}, "recalibration": {"skipped": "too few rows"}})
+    with open(sd / "EMA-B_m0000.mcap", "wb") as f:
+        w = Ros2Writer(f)
+        s = w.register_msgdef("std_msgs/msg/String", "string data")
+        for k, r in enumerate(reports):
+            w.write_message("/hd/ground/report", s, {"data": json.dumps(r)}, log_time=k + 1, publish_time=k + 1)
+        w.finish()
+    view = load_run(run)
+    for aid, n in (("EMA-A", 2), ("EMA-B", 3)):
+        rows = view.actuators[aid].recalibrations
+        assert [r["analysis"] for r in rows] == [0, 1], aid  # the skipped analysis adds no row
+        assert [r["T_C"] for r in rows] == [0.10, 0.11] and rows[0]["rms_after"] == 0.2 and rows[0]["missions"] == n
+    assert "recalibration history" in render(view)
