@@ -50,27 +50,46 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
     """Leave-one-unit-out: life model (grid posterior) and UKF on it; units with a failure are scored."""
     from hd_prognostic.lifemodel import LifeModel, UnitEvents, predict_history
 
-    per_grid, per_ukf, hists = [], [], {}
+    per_grid, per_ukf, per_plug, hists = [], [], [], {}
     for i, u in enumerate(units):
         if u.events.failure is None:
             continue
         t0 = time.perf_counter()
         train = [v for j, v in enumerate(units) if j != i]
-        m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit)
+        m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
+                          seed=seed)
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
-        hg = predict_history(m, test, n_samples=samples, seed=seed)
-        hu = predict_history(m, test, n_samples=samples, seed=seed, method="ukf")
-        sg, su = _score(hg, eols[u.unit]), _score(hu, eols[u.unit])
-        sg["unit"] = su["unit"] = u.unit
+        sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
         per_grid.append(sg)
         per_ukf.append(su)
-        hists[u.unit] = hg
+        per_plug.append(sp)
         if progress:
             print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
-                  f" / {su['coverage_p5_p95']:.2f}  [{time.perf_counter() - t0:.1f} s]", flush=True)
-    return per_grid, per_ukf, hists
+                  f" / {su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
+                  f"{sp['coverage_p5_p95']:.2f} (ESS {m.fit_info['parameter_uncertainty'].get('ess', 0):.0f})"
+                  f"  [{time.perf_counter() - t0:.1f} s]", flush=True)
+    return per_grid, per_ukf, per_plug
+
+
+DRAWS = [20]  # posterior parameter draws per fit (--draws)
+
+
+def _predict_all(m, test, eol, samples, seed):
+    """Scores of the life model (posterior predictive over the parameter draws), the UKF on the same model
+    (one filter per draw) and the plug-in point estimate (the maximum-likelihood parameters alone, the
+    threshold law widened to its Student-t predictive: the model before the parameter draws)."""
+    from hd_prognostic.lifemodel import LifeModel, predict_history
+
+    plug = LifeModel(m.theta, m.E_ref, m.exposure, m.feature, m.inspections, m.fit_info, m.time_unit)
+    out = []
+    for model, method in ((m, "grid"), (m, "ukf"), (plug, "grid")):
+        h = predict_history(model, test, n_samples=samples, seed=seed, method=method)
+        sc = _score(h, eol)
+        sc["unit"] = test.unit
+        out.append(sc)
+    return out
 
 
 def _copy_unit(u):
@@ -101,7 +120,7 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
             us = [unit_history(a, args.feature, e) for a in fleet]
             attach_events(us, ev)
             cands[e] = us
-        best = fit_best(cands, feature=args.feature)
+        best = fit_best(cands, feature=args.feature, n_draws=0)
         exposure = best.exposure
         res["exposure_choice"] = best.fit_info["exposure_candidates"]
         print(f"{name}: exposure by maximum likelihood on all of {name}: {exposure} "
@@ -109,8 +128,8 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
     units = [unit_history(a, args.feature, exposure) for a in fleet]
     attach_events(units, ev)
     eols = {k: v.failure for k, v in ev.items()}
-    g, u, _ = _louo(units, eols, exposure, "mission", args.feature, args.samples, args.seed, True, name)
-    res.update({"exposure": exposure, "life": g, "ukf": u})
+    g, u, pl = _louo(units, eols, exposure, "mission", args.feature, args.samples, args.seed, True, name)
+    res.update({"exposure": exposure, "life": g, "ukf": u, "plugin": pl})
     ref = []
     if not args.no_reference:
         for a in fleet:
@@ -167,8 +186,8 @@ def events_fleet(name, fleet_dir, exposure, args):
     units = [unit_history(a, args.feature, exposure) for a in acts]
     attach_events(units, ev)
     eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
-    g, u, _ = _louo(units, eols, exposure, "mission", args.feature, args.samples, args.seed, True, name)
-    return {"exposure": exposure, "life": g, "ukf": u, "reference": [],
+    g, u, pl = _louo(units, eols, exposure, "mission", args.feature, args.samples, args.seed, True, name)
+    return {"exposure": exposure, "life": g, "ukf": u, "plugin": pl, "reference": [],
             "reference_name": "- (no wear truth in these bags)"}
 
 
@@ -179,8 +198,8 @@ def csv_dataset(name, hi, events, args):
     ev = read_events(events)
     attach_events(units, ev, str(events))
     eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
-    g, u, _ = _louo(units, eols, "csv exposure", "step", "hi", args.samples, args.seed, True, name)
-    return {"exposure": "time column", "life": g, "ukf": u}
+    g, u, pl = _louo(units, eols, "csv exposure", "step", "hi", args.samples, args.seed, True, name)
+    return {"exposure": "time column", "life": g, "ukf": u, "plugin": pl}
 
 
 def main(argv=None) -> int:
@@ -199,9 +218,11 @@ def main(argv=None) -> int:
     ap.add_argument("--samples", type=int, default=1000)
     ap.add_argument("--particles", type=int, default=1000, help="reference PF particles")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--draws", type=int, default=20, help="posterior parameter draws per life-model fit")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--no-reference", action="store_true")
     args = ap.parse_args(argv)
+    DRAWS[0] = args.draws
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
@@ -246,7 +267,7 @@ def main(argv=None) -> int:
         results["virkler"] = res
     table = {}
     for n, r in results.items():
-        table[n] = {"life model": _row(r["life"]), "UKF on it": _row(r["ukf"]),
+        table[n] = {"life model": _row(r["life"]), "UKF on it": _row(r["ukf"]), "plug-in": _row(r.get("plugin", [])),
                     "threshold bound": float(np.mean(list(r["bound"].values()))) if r.get("bound") else None,
                     "reference": _row(r.get("reference", [])), "exposure": r.get("exposure"),
                     "reference_name": r.get("reference_name"), "seconds": r.get("seconds")}
@@ -254,12 +275,14 @@ def main(argv=None) -> int:
                                                            default=lambda o: float(o) if np.isscalar(o) else str(o)))
     print()
     print("| dataset | units scored | clock | life model: in-cone / P5-P95 cov / CRA / CRPS | UKF on it | "
-          "reference | reference model | in-cone bound (true wear, population threshold) |")
-    print("|---|---|---|---|---|---|---|---|")
+          "plug-in point estimate (no parameter draws) | reference | reference model | "
+          "in-cone bound (true wear, population threshold) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for n, t in table.items():
         f = lambda r: (f"{r['frac_in_cone_lambda_ge_0.5']:.2f} / {r['coverage_p5_p95']:.2f} / {r['cra']:.2f} / "
                        f"{r['crps_mean']:.3g}" if r["n"] else "-")
         print(f"| {n} | {t['life model']['n']} | {t['exposure']} | {f(t['life model'])} | {f(t['UKF on it'])} | "
+              f"{f(t['plug-in'])} | "
               f"{f(t['reference'])} | {t['reference_name'] or '-'} | "
               f"{'-' if t['threshold bound'] is None else format(t['threshold bound'], '.2f')} |")
     print(f"\nwrote {out}/bench_prognostics.json; {time.perf_counter() - t_all:.0f} s in all")
@@ -277,32 +300,32 @@ def csv_dataset_every(name, hi, events, args):
     k = max(1, args.virkler_every)
     scored = {u.unit for u in units[::k]}
     keep = {u: t for u, t in eols.items() if u in scored}
-    g, u, _ = _louo_subset(units, keep, args, name)
-    return {"exposure": "time column", "life": g, "ukf": u, "scored_every": k}
+    g, u, pl = _louo_subset(units, keep, args, name)
+    return {"exposure": "time column", "life": g, "ukf": u, "plugin": pl, "scored_every": k}
 
 
 def _louo_subset(units, eols, args, name):
-    from hd_prognostic.lifemodel import LifeModel, UnitEvents, predict_history
+    """Leave-one-unit-out scoring the units in ``eols`` only (each fit uses all the other units)."""
+    from hd_prognostic.lifemodel import LifeModel, UnitEvents
 
-    per_grid, per_ukf = [], []
+    per_grid, per_ukf, per_plug = [], [], []
     for i, u in enumerate(units):
         if u.unit not in eols:
             continue
         t0 = time.perf_counter()
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
-                          time_unit="step")
+                          time_unit="step", n_draws=DRAWS[0], seed=args.seed)
         test = _copy_unit(u)
         test.events = UnitEvents()
-        hg = predict_history(m, test, n_samples=args.samples, seed=args.seed)
-        hu = predict_history(m, test, n_samples=args.samples, seed=args.seed, method="ukf")
-        sg, su = _score(hg, eols[u.unit]), _score(hu, eols[u.unit])
-        sg["unit"] = su["unit"] = u.unit
+        sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
         per_grid.append(sg)
         per_ukf.append(su)
+        per_plug.append(sp)
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
-              f"{su['coverage_p5_p95']:.2f}  [{time.perf_counter() - t0:.1f} s]", flush=True)
-    return per_grid, per_ukf, None
+              f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
+              f"{sp['coverage_p5_p95']:.2f}  [{time.perf_counter() - t0:.1f} s]", flush=True)
+    return per_grid, per_ukf, per_plug
 
 
 if __name__ == "__main__":

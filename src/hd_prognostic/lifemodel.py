@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import optimize, special, stats
+from scipy import optimize, special
 
 EVENT_KINDS = ("failure", "removal", "inspection")
 EVENT_COLUMNS = ("actuator_id", "mission_index", "event", "quantity", "value")
@@ -456,14 +456,111 @@ class _SubBatch(_Batch):
         self.qX = np.exp(b * self.qx)
 
 
+def _hessian(f, x: np.ndarray, f0: float, h: float) -> np.ndarray:
+    """Central finite-difference Hessian of ``f`` at ``x`` (step ``h`` in every coordinate)."""
+    d = len(x)
+    H = np.zeros((d, d))
+    E = np.eye(d) * h
+    fp = np.array([f(x + E[i]) for i in range(d)])
+    fm = np.array([f(x - E[i]) for i in range(d)])
+    for i in range(d):
+        H[i, i] = (fp[i] - 2.0 * f0 + fm[i]) / (h * h)
+        for j in range(i):
+            H[i, j] = H[j, i] = (f(x + E[i] + E[j]) - f(x + E[i] - E[j]) - f(x - E[i] + E[j])
+                                 + f(x - E[i] - E[j])) / (4.0 * h * h)
+    return H
+
+
+def _mvt_logpdf(X: np.ndarray, m: np.ndarray, L: np.ndarray, dof: float) -> np.ndarray:
+    """Log density of the multivariate Student-t with location m, scale L L^T, ``dof`` at the rows of X."""
+    d = len(m)
+    q = np.sum(np.linalg.solve(L, (X - m).T) ** 2, axis=0)
+    return (special.gammaln(0.5 * (dof + d)) - special.gammaln(0.5 * dof) - 0.5 * d * math.log(dof * math.pi)
+            - float(np.sum(np.log(np.abs(np.diag(L))))) - 0.5 * (dof + d) * np.log1p(q / dof))
+
+
+def _posterior_draws(nlp, x_hat: np.ndarray, n_draws: int, rng: np.random.Generator, n_proposals: int = 400,
+                     dof: float = 5.0, h: float = 3e-3, max_rounds: int = 5) -> tuple[list[np.ndarray], dict]:
+    """Draws from the posterior of the population parameters, ``exp(-nlp)`` (log likelihood + log prior, in
+    the fit's scaled coordinates), by adaptive multiple importance sampling (AMIS, Cornuet et al. 2012):
+
+    1. Laplace approximation at the posterior mode (finite-difference Hessian) as a multivariate Student-t
+       proposal (``dof``; heavier tails than the Gaussian so the weights stay bounded);
+    2. while the effective sample size is below ``2 n_draws`` (a posterior far from Gaussian, e.g. a ridge),
+       a new Student-t proposal from the weighted mean and covariance of all samples so far, every sample
+       re-weighted against the equal mixture of all proposals used (deterministic multiple mixture);
+    3. ``n_draws`` by systematic resampling.
+
+    A fleet of a handful of units leaves the population parameters (rate scatter, threshold scatter, shape)
+    uncertain, and the maximum-likelihood scatter of a few units is biased low, often to 0 (a boundary
+    estimate); the point estimate then gives intervals that are too narrow. Mixing the prognosis over these
+    draws is the posterior predictive. Returns the draws and a summary (effective sample size...)."""
+    r = optimize.minimize(nlp, x_hat, method="L-BFGS-B", options={"maxiter": 200, "eps": 1e-6})
+    f_hat = nlp(x_hat)
+    x_map, f_map = (r.x, float(r.fun)) if np.isfinite(r.fun) and r.fun < f_hat else (x_hat, f_hat)
+    H = _hessian(nlp, x_map, f_map, h)
+    H = 0.5 * (H + H.T)
+    w, V = np.linalg.eigh(H)
+    # a flat or numerically non-convex direction gets a unit-scale proposal (the weights then correct it)
+    w_used = np.where(np.isfinite(w) & (w > 1.0), w, 1.0)
+    S0 = V @ np.diag(1.0 / w_used) @ V.T  # Laplace covariance (floored)
+    d = len(x_map)
+    props = [(x_map, np.linalg.cholesky(S0 + 1e-12 * np.eye(d)))]
+    X = np.zeros((0, d))
+    lp = np.zeros(0)
+    ess_hist = []
+    for rnd in range(max_rounds):
+        m, L = props[-1]
+        zs = rng.standard_normal((n_proposals, d))
+        g = np.sqrt(dof / rng.chisquare(dof, n_proposals))
+        Xn = m + (zs * g[:, None]) @ L.T
+        if rnd == 0:
+            Xn[0] = x_map  # the mode itself is always a candidate
+        ln = np.array([-nlp(x) for x in Xn])
+        X, lp = np.vstack([X, Xn]), np.concatenate([lp, np.where(np.isfinite(ln) & (ln > -1e29), ln, -np.inf)])
+        logq = _lse(np.stack([_mvt_logpdf(X, mm, LL, dof) for mm, LL in props], axis=-1)) - math.log(len(props))
+        lw = lp - logq
+        lw -= np.max(lw)
+        wt = np.exp(lw)
+        wt /= wt.sum()
+        ess = float(1.0 / np.sum(wt ** 2))
+        ess_hist.append(ess)
+        if ess >= 2 * n_draws or rnd == max_rounds - 1:
+            break
+        mu_w = wt @ X
+        C = (wt[:, None] * (X - mu_w)).T @ (X - mu_w)
+        if ess < d + 1:  # too few effective points for a full covariance: keep the Laplace shape in it
+            C = 0.5 * (C + S0)
+        C = 0.5 * (C + C.T)
+        ev, EV = np.linalg.eigh(C)
+        C = EV @ np.diag(np.maximum(ev, 1e-10 * max(float(ev.max()), 1e-300))) @ EV.T
+        props.append((mu_w, np.linalg.cholesky(C)))
+    u = (rng.uniform() + np.arange(n_draws)) / n_draws  # systematic resampling
+    idx = np.minimum(np.searchsorted(np.cumsum(wt), u), len(X) - 1)
+    info = {"method": "posterior draws: Laplace at the mode -> adaptive multiple importance sampling "
+                      "(Student-t proposals) -> systematic resampling",
+            "prior": "uniform on the standard deviations (s, s_a, sigma, s_D, tau) and on rho; flat on the rest",
+            "n_draws": int(n_draws), "n_samples": int(len(X)), "rounds": len(props), "ess": ess,
+            "ess_per_round": ess_hist, "distinct_draws": int(len(set(idx.tolist()))),
+            "laplace_sd": [float(v) for v in np.sqrt(np.diag(S0))],
+            "hessian_eigen_min": float(np.min(w)), "map_minus_mle_nlp": float(f_map - f_hat)}
+    return [X[i] for i in idx], info
+
+
 class LifeModel:
     """Fitted population parameters + the prognosis on one unit (see the module docstring)."""
 
     PARAMS = ("mu", "log_s", "log_b", "c", "a0", "log_sa", "log_sigma", "log_sD", "atanh_rho")
 
     def __init__(self, theta: dict, E_ref: float, exposure: str = "missions", feature: str = "hi",
-                 inspections: dict | None = None, fit_info: dict | None = None, time_unit: str = "mission"):
+                 inspections: dict | None = None, fit_info: dict | None = None, time_unit: str = "mission",
+                 draws: list | None = None, plug_in: bool = True):
         self.theta = {k: float(v) for k, v in theta.items()}
+        # posterior draws of the population parameters ({"theta", "inspections"} each); the prognosis mixes
+        # them (parameter uncertainty). plug_in: a point-estimate model widens its threshold law to the
+        # Student-t predictive instead (old model files, fits with n_draws=0)
+        self.draws = list(draws or [])
+        self.plug_in = plug_in
         self.E_ref = float(E_ref)
         self.exposure = exposure
         self.feature = feature
@@ -479,7 +576,7 @@ class LifeModel:
     def to_json(self, path=None) -> dict:
         d = {"kind": "hdphm life model v1", "theta": self.theta, "E_ref": self.E_ref, "exposure": self.exposure,
              "feature": self.feature, "inspections": self.inspections, "fit_info": self.fit_info,
-             "time_unit": self.time_unit,
+             "time_unit": self.time_unit, "parameter_draws": self.draws,
              "readable": {"rate_log_mean": self.theta["mu"], "rate_log_std": math.exp(self.theta["log_s"]),
                           "shape_b": self.b, "hi_change_at_median_threshold": self.theta["c"],
                           "hi_offset_mean": self.theta["a0"], "hi_offset_std": math.exp(self.theta["log_sa"]),
@@ -505,7 +602,8 @@ class LifeModel:
             if src.get("kind") != "hdphm life model v1":
                 raise ValueError(f"{p}: not a life model written by 'hdphm prognostic fit' (kind {src.get('kind')!r})")
         return cls(src["theta"], src["E_ref"], src.get("exposure", "missions"), src.get("feature", "hi"),
-                   src.get("inspections", {}), src.get("fit_info", {}), src.get("time_unit", "mission"))
+                   src.get("inspections", {}), src.get("fit_info", {}), src.get("time_unit", "mission"),
+                   draws=src.get("parameter_draws", []))
 
     def log_marginal(self, units: list[UnitHistory]) -> np.ndarray:
         """Log marginal likelihood of each unit's record and events under this model."""
@@ -516,8 +614,12 @@ class LifeModel:
     # ---- fit
     @classmethod
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
-            time_unit: str = "mission", maxiter: int = 600, progress: bool = False) -> "LifeModel":
-        """Maximum likelihood over the units (their HI histories and events); see the module docstring."""
+            time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
+            seed: int = 0) -> "LifeModel":
+        """Maximum likelihood over the units (their HI histories and events); see the module docstring.
+
+        ``n_draws`` posterior draws of the population parameters (:func:`_posterior_draws`; 0: point estimate
+        only) carry the parameter uncertainty of a small fleet into the prognosis."""
         units = [u for u in units if len(u.t) >= 2 and np.isfinite(u.y).sum() >= 2]
         if len(units) < 2:
             raise ValueError(f"life-model fit: {len(units)} unit(s) with >= 2 finite health-indicator values; need >= 2")
@@ -606,14 +708,34 @@ class LifeModel:
                                options={"maxiter": maxiter, "maxfev": maxiter, "xatol": 1e-4, "fatol": 1e-3,
                                         "adaptive": True})
         th, ins = unpack(r2.x)
+        draws, pinfo = [], {"method": "none (point estimate)"}
+        if n_draws > 0:
+            def log_prior(xs):  # uniform on every standard deviation and on rho, flat on the rest
+                t, i_ = unpack(xs)
+                return (t["log_s"] + t["log_sa"] + t["log_sigma"] + t["log_sD"]
+                        + sum(v["log_tau"] for v in i_.values())
+                        + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
+
+            xd, pinfo = _posterior_draws(lambda xs: nll(xs) - log_prior(xs), r2.x, n_draws,
+                                         np.random.default_rng(seed))
+            draws = [dict(zip(("theta", "inspections"), unpack(x))) for x in xd]
         info = {"n_units": len(units), "n_failures": nfail, "n_censored": len(units) - nfail,
+                "parameter_uncertainty": pinfo,
                 "n_records": int(sum(np.isfinite(u.y).sum() for u in units)), "log_likelihood": float(-r2.fun),
                 "n_params": len(keys), "evals": [int(r.nfev), int(r2.nfev)], "lbfgs_loglik": float(-r.fun), "converged": bool(r2.success),
                 "start": theta0, "notes": notes, "units": [u.unit for u in units],
                 "rate_median": float(np.nanmedian([u.rate() for u in units])),
                 "hours_per_step": (float(np.median(hp)) if (hp := [u.hours_per_step for u in units
                                                                   if u.hours_per_step]) else None)}
-        return cls(th, E_ref, exposure, feature, ins, info, time_unit)
+        return cls(th, E_ref, exposure, feature, ins, info, time_unit, draws=draws)
+
+    def members(self) -> list["LifeModel"]:
+        """The models the prognosis mixes: one per posterior parameter draw (threshold law normal in each:
+        its scatter's uncertainty is in the draws), or the point estimate alone when there are no draws."""
+        if not self.draws:
+            return [self]
+        return [LifeModel(d["theta"], self.E_ref, self.exposure, self.feature, d.get("inspections", {}),
+                          self.fit_info, self.time_unit, plug_in=False) for d in self.draws]
 
     # ---- prognosis
     def posterior(self, u: UnitHistory, times=None) -> tuple[np.ndarray, np.ndarray]:
@@ -631,7 +753,7 @@ class LifeModel:
         estimated from n failures, widened to the Student-t predictive (n - 1 dof, scale s_D sqrt(1 + 1/n))."""
         n = int(self.fit_info.get("n_failures", 0))
         sD = math.exp(self.theta["log_sD"])
-        if n >= 3:
+        if n >= 3 and self.plug_in:
             return float(n - 1), sD * math.sqrt(1.0 + 1.0 / n)
         return float("inf"), sD
 
@@ -639,18 +761,22 @@ class LifeModel:
         """E_f per sample of z: threshold from its predictive law truncated to 'not failed by E_k'."""
         b = self.b
         df, sc = self.threshold_predictive()
-        dist = stats.norm() if not np.isfinite(df) else stats.t(df)
+        # the normal / Student-t cdf and inverse from scipy.special (a frozen scipy.stats law per call costs ms)
+        cdf, ppf = ((special.ndtr, special.ndtri) if not np.isfinite(df) else
+                    (lambda v: special.stdtr(df, v), lambda p: special.stdtrit(df, p)))
         lo = (z + b * math.log(E_k / self.E_ref)) / sc if E_k > 0 else np.full_like(z, -np.inf)
-        p_lo = dist.cdf(lo)
+        p_lo = cdf(lo)
         u = p_lo + (1.0 - p_lo) * rng.uniform(0.0, 1.0, len(z))
-        x = dist.ppf(np.minimum(u, 1 - 1e-15))
+        x = ppf(np.minimum(u, 1 - 1e-15))
         bad = ~np.isfinite(x) | (x < lo)
         x[bad] = lo[bad] + np.abs(rng.standard_normal(int(bad.sum()))) * 0.1  # far tail: just past the bound
         return self.E_ref * np.exp((sc * x - z) / b)
 
-    def rul_samples(self, z: np.ndarray, u: UnitHistory, t_k: float, rng: np.random.Generator) -> np.ndarray:
-        """RUL in the unit's time axis for posterior samples ``z`` at time ``t_k`` (alive at ``t_k``)."""
-        h = u.truncated(t_k)
+    def rul_samples(self, z: np.ndarray, u: UnitHistory, t_k: float, rng: np.random.Generator,
+                    h: UnitHistory | None = None) -> np.ndarray:
+        """RUL in the unit's time axis for posterior samples ``z`` at time ``t_k`` (alive at ``t_k``);
+        ``h``: ``u.truncated(t_k)`` when the caller has it already."""
+        h = u.truncated(t_k) if h is None else h
         E_k = h.exposure_at(t_k)
         Ef = self.sample_failure_exposure(z, E_k, rng)
         rate = h.rate()
@@ -668,45 +794,77 @@ class LifeModel:
         return tuple(float(np.exp(v) * X) for v in q)
 
 
+def _split(n: int, k: int) -> list[int]:
+    """n samples over k members, as evenly as possible."""
+    return [n // k + (1 if i < n % k else 0) for i in range(k)]
+
+
+def _latent_quantiles(parts, qs=(0.05, 0.5, 0.95)) -> tuple[float, ...]:
+    """Quantiles of the latent degradation L = exp(z) X pooled over members: ``parts`` = [(z grid, weights,
+    X)], equal member weights; the mixture CDF on the union of the members' ln L grids (exact on a grid:
+    one member gives :meth:`LifeModel.latent_quantiles`)."""
+    if any(X <= 0 for _, _, X in parts):
+        return tuple(0.0 for _ in qs)
+    grids = [(z + math.log(X), np.cumsum(w)) for z, w, X in parts]
+    if len(grids) == 1:
+        g, c = grids[0]
+    else:
+        g = np.unique(np.concatenate([v for v, _ in grids]))
+        c = np.mean([np.interp(g, v, cw, left=0.0, right=1.0) for v, cw in grids], axis=0)
+    return tuple(float(np.exp(v)) for v in np.interp(qs, c, g))
+
+
 def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, seed: int = 0,
                     t_start: float | None = None, method: str = "grid"):
     """RUL history of one unit: posterior at every record from ``t_start`` on (``method``: ``grid`` = exact
-    posterior over z; ``ukf`` = unscented Kalman filter over (z, a) on the same model)."""
+    posterior over z; ``ukf`` = unscented Kalman filter over (z, a) on the same model). With posterior
+    parameter draws (:meth:`LifeModel.members`) every draw gets its own posterior / filter and the samples
+    are pooled (posterior predictive over the population parameters)."""
     from hd_prognostic.tracking import RULHistory
 
     rng = np.random.default_rng(seed)
     hist = RULHistory(unit=u.unit, time_unit=model.time_unit, state_names=("L",), threshold=1.0)
-    ukf = _UKF(model) if method == "ukf" else None
+    members = model.members()
+    ns = _split(n_samples, len(members))
+    if method == "ukf":
+        ukfs = [_UKF(m) for m in members]
+    else:
+        post = [m.posterior(u) for m in members]
     hrs, h5, h50, h95 = u.hours_per_step or model.fit_info.get("hours_per_step"), [], [], []
-    if ukf is None:
-        ZG, WG = model.posterior(u)
     for k, tk in enumerate(u.t):
-        X = (max(u.E[k], 0.0) / model.E_ref) ** model.b
-        if ukf is not None:
-            ukf.update(u.y[k], X)
-            z = ukf.sample(n_samples, rng)
-            # survival to E(t_k) as importance weights on the Gaussian posterior
-            sD = math.exp(model.theta["log_sD"])
-            lw = special.log_ndtr(-(z + model.b * math.log(max(u.E[k], 1e-300) / model.E_ref)) / sD) \
-                if u.E[k] > 0 else np.zeros(n_samples)
-            w = np.exp(lw - lw.max())
-            z = z[rng.choice(n_samples, n_samples, p=w / w.sum())]
-            zq = np.quantile(z, [0.05, 0.5, 0.95])
-            lq = tuple(float(np.exp(v) * X) for v in zq)
-        else:
-            zg, wg = ZG[k], WG[k]
-            dz = zg[1] - zg[0]
-            z = rng.choice(zg, n_samples, p=wg) + rng.uniform(-0.5, 0.5, n_samples) * dz
-            lq = model.latent_quantiles(zg, wg, X)
+        rs, lat, parts = [], [], []
+        hk = u.truncated(tk)
+        for j, m in enumerate(members):
+            if not ns[j]:
+                continue
+            X = (max(u.E[k], 0.0) / m.E_ref) ** m.b
+            if method == "ukf":
+                f = ukfs[j]
+                f.update(u.y[k], X)
+                z = f.sample(ns[j], rng)
+                # survival to E(t_k) as importance weights on the Gaussian posterior
+                sD = math.exp(m.theta["log_sD"])
+                lw = special.log_ndtr(-(z + m.b * math.log(max(u.E[k], 1e-300) / m.E_ref)) / sD) \
+                    if u.E[k] > 0 else np.zeros(ns[j])
+                w = np.exp(lw - lw.max())
+                z = z[rng.choice(ns[j], ns[j], p=w / w.sum())]
+            else:
+                zg, wg = post[j][0][k], post[j][1][k]
+                z = rng.choice(zg, ns[j], p=wg) + rng.uniform(-0.5, 0.5, ns[j]) * (zg[1] - zg[0])
+                parts.append((zg, wg, X))
+            lat.append(np.exp(z) * X)
+            if t_start is None or tk >= t_start:
+                rs.append(m.rul_samples(z, u, tk, rng, hk))
+        lq = _latent_quantiles(parts) if parts else np.quantile(np.concatenate(lat), [0.05, 0.5, 0.95])
         hist.t.append(float(tk))
         hist.z.append(float(u.y[k]))
-        hist.state_mean.append([lq[1]])
-        hist.state_p5.append([lq[0]])
-        hist.state_p95.append([lq[2]])
+        hist.state_mean.append([float(lq[1])])
+        hist.state_p5.append([float(lq[0])])
+        hist.state_p95.append([float(lq[2])])
         hist.ess.append(float("nan"))
         if t_start is not None and tk < t_start:
             continue
-        r = model.rul_samples(z, u, tk, rng)
+        r = np.concatenate(rs)
         q = np.quantile(r, [0.05, 0.5, 0.95])
         hist.rul_t.append(float(tk))
         hist.p5.append(float(q[0]))
@@ -719,6 +877,7 @@ def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, 
             h50.append(float(q[1] * hrs))
             h95.append(float(q[2] * hrs))
     hist.meta.update({"model": "life model (latent degradation path)", "method": method,
+                      "parameter_draws": len(model.draws),
                       "exposure": model.exposure, "feature": model.feature, "hours_per_step": hrs})
     if hrs:
         hist.meta["rul_hours"] = {"p5": h5, "p50": h50, "p95": h95}
@@ -774,13 +933,14 @@ class _UKF:
 
 
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
-             progress: bool = False) -> LifeModel:
-    """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one;
-    the log-likelihoods of all candidates go into ``fit_info["exposure_candidates"]``."""
+             progress: bool = False, n_draws: int = 20) -> LifeModel:
+    """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
+    (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
+    into ``fit_info["exposure_candidates"]``."""
     fits, errs = {}, {}
     for name, units in candidates.items():
         try:
-            fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit)
+            fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -790,6 +950,8 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
         raise ValueError("; ".join(f"{k}: {v}" for k, v in errs.items()))
     best = max(fits, key=lambda k: fits[k].fit_info["log_likelihood"])
     m = fits[best]
+    if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
+        m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws)
     m.fit_info["exposure_candidates"] = {k: f.fit_info["log_likelihood"] for k, f in fits.items()}
     if errs:
         m.fit_info["exposure_errors"] = errs
@@ -798,11 +960,17 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
 
 def predict_at(model: LifeModel, u: UnitHistory, rng: np.random.Generator, n_samples: int = 500) -> dict:
     """One prediction at the unit's last record (what the prognostic node publishes per mission):
-    latent degradation P5/P50/P95 (1 = median failure threshold) and RUL samples in the unit's time axis."""
+    latent degradation P5/P50/P95 (1 = median failure threshold) and RUL samples in the unit's time axis,
+    pooled over the model's posterior parameter draws."""
     tk = float(u.t[-1])
-    zg, wg = model.posterior(u, [tk])
-    zg, wg = zg[0], wg[0]
-    z = rng.choice(zg, n_samples, p=wg) + rng.uniform(-0.5, 0.5, n_samples) * (zg[1] - zg[0])
-    X = (max(u.E[-1], 0.0) / model.E_ref) ** model.b
-    lq = model.latent_quantiles(zg, wg, X)
-    return {"latent": lq, "rul": model.rul_samples(z, u, tk, rng)}
+    members = model.members()
+    parts, rs = [], []
+    for m, n in zip(members, _split(n_samples, len(members))):
+        if not n:
+            continue
+        zg, wg = m.posterior(u, [tk])
+        zg, wg = zg[0], wg[0]
+        z = rng.choice(zg, n, p=wg) + rng.uniform(-0.5, 0.5, n) * (zg[1] - zg[0])
+        parts.append((zg, wg, (max(u.E[-1], 0.0) / m.E_ref) ** m.b))
+        rs.append(m.rul_samples(z, u, tk, rng))
+    return {"latent": _latent_quantiles(parts), "rul": np.concatenate(rs)}
