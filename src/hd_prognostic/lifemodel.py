@@ -709,7 +709,13 @@ class LifeModel:
                                         "adaptive": True})
         th, ins = unpack(r2.x)
         draws, pinfo = [], {"method": "none (point estimate)"}
-        if n_draws > 0:
+        if n_draws > 0 and min(nfail, len(units)) < 3:
+            # with 2 units / failures the posterior of a scale under its uniform prior is improper (Gelman 2006:
+            # proper from 3 groups on): there is nothing to draw from; the plug-in estimate with its Student-t threshold is used
+            pinfo = {"method": f"none: {min(nfail, len(units))} failures/units < 3, the posterior of the "
+                               "population scatter is improper under the uniform scale prior; plug-in estimate"}
+            notes.append("parameter uncertainty not propagated: fewer than 3 failures (plug-in estimate)")
+        elif n_draws > 0:
             def log_prior(xs):  # uniform on every standard deviation and on rho, flat on the rest
                 t, i_ = unpack(xs)
                 return (t["log_s"] + t["log_sa"] + t["log_sigma"] + t["log_sD"]

@@ -197,3 +197,11 @@ def test_model_json_carries_the_parameter_draws(tmp_path, synth_fit):
     d = json.loads((tmp_path / "m.json").read_text())
     d.pop("parameter_draws")
     assert LifeModel.from_json(d).members()[0].plug_in
+
+
+def test_two_failures_give_the_plug_in_model_with_a_note():
+    """With 2 failed units the scale posterior is improper under its uniform prior: no draws, said so."""
+    units, _ = synth_units(2, seed=7, censor_frac=0.0)
+    m = LifeModel.fit(units, n_draws=20)
+    assert m.draws == [] and m.members() == [m] and m.plug_in
+    assert any("fewer than 3 failures" in n for n in m.fit_info["notes"])
