@@ -1,9 +1,11 @@
 """Benchmark: the life model fitted from operator records, leave-one-unit-out, per dataset.
 
 For every dataset and every held-out unit: fit the life model on the *other* units' health-indicator
-histories and events (failures / censoring) only, predict the held-out unit's RUL at every record, score it
-against its failure time (in-cone alpha = 0.2 for lambda >= 0.5, P5-P95 coverage, CRA, CRPS). In the same
-run: the UKF on the same fitted model, and today's reference model (simulated fleets: the particle filter
+histories and events (failures / censoring) only (``--draws`` posterior parameter draws per fit), predict the
+held-out unit's RUL at every record, score it against its failure time (in-cone alpha = 0.2 for lambda >= 0.5,
+P5-P95 coverage, CRA, CRPS). In the same run: the UKF on the same fitted model (one filter per draw), the plug-in
+point estimate of the same fit (maximum-likelihood parameters only: the model before the parameter draws), and
+today's reference model (simulated fleets: the particle filter
 calibrated on the training units' *wear truth* from /sim/health, an upper reference an operator cannot
 have; NASA / Virkler: the exponential-fade / Paris-law particle filters of ``realdata.py``).
 
@@ -13,8 +15,8 @@ capacity <= 80 % of rated; 70 % leaves 1 failure in some training folds), Virkle
 The degradation clock of the simulated fleets is chosen by maximum likelihood on the fleet named by
 ``--dev`` (all its units) and then fixed for every other fleet: no choice is made on the scored units.
 
-    hdphm bench prognostics --extra --fleet dev=DIR --fleet scored=DIR --dev dev --nasa DIR --virkler DIR \
-        --out runs/bench_prognostics
+    hdphm bench prognostics --extra --fleet dev=DIR --fleet scored=DIR --fleet smooth-cubic=DIR ... --dev dev \
+        --events-fleet plant2=DIR --nasa DIR --virkler DIR --virkler-every 2 --out runs/bench_prognostics
 """
 
 from __future__ import annotations
