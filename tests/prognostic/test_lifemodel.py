@@ -130,12 +130,16 @@ def test_attach_events_drops_records_after_failure():
     assert len(u.t) == n - 3 and "not used" in notes[0]
 
 
-def test_node_tracker_equals_batch(synth_fit):
-    """The prognostic node's LifeTracker (one window row per mission here) gives batch's posterior."""
+@pytest.mark.parametrize("n_draws", [0, 4])
+def test_node_tracker_equals_batch(synth_fit, n_draws):
+    """The prognostic node's LifeTracker (one window row per mission here) gives batch's posterior, for the
+    plug-in model and for a mixture over parameter draws (latent quantiles of the mixture exact on the grids)."""
     from hd_prognostic.node import PARAMS, LifeTracker
 
     _, _, m = synth_fit
-    m = LifeModel(m.theta, m.E_ref, "load", "HF_MTW_IF", {}, m.fit_info)
+    draws = [{"theta": d["theta"], "inspections": {}} for d in m.draws[:n_draws]]
+    m = LifeModel(m.theta, m.E_ref, "load", "HF_MTW_IF", {}, m.fit_info, draws=draws)
+    assert len(m.members()) == max(n_draws, 1)
     units, _ = synth_units(1, seed=8, censor_frac=0.0)
     u = units[0]
     W = np.full(len(u.t), 1.0)  # load clock with W = 1 J per mission: E(k) = k
