@@ -20,7 +20,6 @@ mission shorter than the warm-up; the residuals record the twin fallbacks here t
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
