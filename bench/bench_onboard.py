@@ -39,7 +39,7 @@ PUBLISHER = textwrap.dedent('''
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
     from synth import make_mission
-    from hdphm import rosutil as ru
+    import hd_ros as ru
     ctx = ru.init_context({domain})
     node = Node("bench_pub", context=ctx)
     pub = node.create_publisher(JointState, ru.TOPIC_JOINT_STATES, ru.qos("sensor"))
@@ -129,7 +129,7 @@ def node_bench(a) -> None:
     from sensor_msgs.msg import JointState
 
     from hd_onboard.node import make_node
-    from hdphm import rosutil as ru
+    import hd_ros as ru
 
     synth = os.path.join(HERE, "..", "tests", "onboard")
     out = {}

@@ -2,10 +2,12 @@
 
 The order (docs/ARCHITECTURE.md, "Layers"), lowest first::
 
-    hd_bag  <  hd_twin  <  hd_onboard  <  hd_prognostic  <  hd_ground  <  hdphm
+    hd_bag  <  hd_ros  <  hd_twin  <  hd_onboard  <  hd_prognostic  <  hd_ground  <  hdphm
     hd_bag  <  hd_sim (the plant: a side branch, imported only by hdphm, tests, bench)
 
-A package may import only packages below it. ``hd_sim`` imports only ``hd_bag``; of the packages
+A package may import only packages below it. ``hd_ros`` (ROS plumbing: topics, QoS, contexts,
+conversion, managed node base, replay and record runtimes) imports only ``hd_bag``. ``hd_sim``
+imports only ``hd_bag`` (not ``hd_ros``); of the packages
 in ``src/`` only ``hdphm`` (CLI, demo, scoring harness) may import ``hd_sim``, and the estimator
 packages (hd_twin, hd_onboard, hd_prognostic, hd_ground) never do: that rule has no exceptions.
 
@@ -27,7 +29,7 @@ from pathlib import Path
 SRC = Path(__file__).resolve().parent.parent / "src"
 
 #: estimator / CBM stack, lowest first (a package may import those before it)
-ORDER = ("hd_bag", "hd_twin", "hd_onboard", "hd_prognostic", "hd_ground", "hdphm")
+ORDER = ("hd_bag", "hd_ros", "hd_twin", "hd_onboard", "hd_prognostic", "hd_ground", "hdphm")
 #: the plant: imports hd_bag only, imported (inside src/) by hdphm only
 PLANT = "hd_sim"
 ESTIMATORS = ("hd_twin", "hd_onboard", "hd_prognostic", "hd_ground")
@@ -47,14 +49,11 @@ def allowed_packages(pkg: str) -> set[str]:
 #   R2 = requirement 2 (node shells; shared pure helpers move down: hd_twin/state.py, trackers),
 #   R3 = requirement 3 (one robust-threshold function: the onboard <-> ground circle gone).
 ALLOWED_UPWARD: set[tuple[str, str]] = {
-    # R1: the four node shells import the ROS plumbing from the CLI package
-    ("hd_twin.node", "hdphm.rosutil"), ("hd_twin.node", "hdphm.managed"),
-    ("hd_onboard.node", "hdphm.rosutil"), ("hd_onboard.node", "hdphm.managed"),
-    ("hd_prognostic.node", "hdphm.rosutil"), ("hd_prognostic.node", "hdphm.managed"),
-    ("hd_ground.node", "hdphm.rosutil"), ("hd_ground.node", "hdphm.managed"),
-    # R2: the twin node borrows the onboard node's helpers and validates states with the detector's
-    #     ChannelThreshold / StiffnessReference / FrictionReference (validation moves to hd_twin/state.py)
-    ("hd_twin.node", "hd_onboard.node"), ("hd_twin.node", "hd_onboard.detector"),
+    # R1 done: the ROS plumbing (hdphm.rosutil, hdphm.managed, replay/record) moved down to hd_ros
+    # R2: the twin node validates states with the detector's ChannelThreshold / StiffnessReference /
+    #     FrictionReference (validation moves to hd_twin/state.py); its borrowed node helpers
+    #     (declare, diag_status) now come from hd_ros
+    ("hd_twin.node", "hd_onboard.detector"),
     # R3: the onboard evaluation tooling calls the ground's per-actuator reference calibration (the
     #     threshold circle is gone: hd_onboard.detector.robust_threshold serves both)
     ("hd_onboard.evaluate", "hd_ground.references"),

@@ -24,7 +24,7 @@ import threading
 import time
 from typing import Any
 
-from hdphm import rosutil as ru
+import hd_ros as ru
 
 NODE_NAME = "ground"
 TOPIC_TRIGGER = "/hd/ground/trigger"
@@ -87,20 +87,15 @@ def analyse_archive(archive_dir: str, healthy_missions: int = 3, do_recal: bool 
 
 def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
               autostart: bool = True):
-    from rclpy.parameter import Parameter
     from std_msgs.msg import String
     from std_srvs.srv import Trigger
 
-    from hd_onboard.node import declare
 
-    from hdphm.managed import ManagedNode, bring_up
+    from hd_ros.managed import ManagedNode, bring_up
 
     class GroundNode(ManagedNode):
         def __init__(self):
-            po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
-                             start_parameter_services=param_services)
-            self.p = declare(self, PARAMS)
+            super().__init__(NODE_NAME, PARAMS, overrides, context=context, param_services=param_services)
             self.n_runs = 0
 
         def configure(self):

@@ -2,7 +2,7 @@
 
 A thin rclpy shell over :class:`hd_onboard.core.OnboardCore`. Subscriptions
 take raw CDR and drain their whole queue per callback, so the core sees
-blocks (see ``hdphm.rosutil.take_all``).
+blocks (see ``hd_ros.convert.take_all``).
 
 Subscribes: ``/hd/joint_states``, ``/hd/command``, ``/hd/temperature``
 (sensor QoS), ``/hd/mission`` (JSON ``hd_mission`` metadata, latched: a new
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from hdphm import rosutil as ru
+import hd_ros as ru
 
 NODE_NAME = "onboard"
 
@@ -68,35 +68,11 @@ def _config_params() -> dict[str, Any]:
 PARAMS.update(_config_params())
 
 
-def declare(node, params: dict[str, Any]) -> dict[str, Any]:
-    """Declare ``params`` (name -> default) on ``node`` and return their current values."""
-    out = {}
-    for k, v in params.items():
-        out[k] = node.declare_parameter(k, v).value
-    return out
-
-
-def diag_status(name: str, level: int, message: str, hardware_id: str, values: dict[str, Any]):
-    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-
-    s = DiagnosticStatus()
-    s.name, s.level, s.message, s.hardware_id = name, bytes([int(level)]), message, hardware_id
-    s.values = [KeyValue(key=str(k), value=_fmt(v)) for k, v in values.items()]
-    return s
-
-
-def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        return repr(v) if math.isfinite(v) else "nan"
-    return str(v)
-
-
 def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
               autostart: bool = True):
     """Build the onboard node (a managed node, configured and activated unless ``autostart`` is False)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
-    from rclpy.parameter import Parameter
     from sensor_msgs.msg import JointState, Temperature
     from std_msgs.msg import Float64MultiArray, String
 
@@ -105,14 +81,12 @@ def make_node(context=None, overrides: dict[str, Any] | None = None, param_servi
     from hd_onboard.expected import make_expected
     from hd_twin import physics as ph
 
-    from hdphm.managed import ManagedNode, bring_up
+    from hd_ros.diagnostics import diag_status
+    from hd_ros.managed import ManagedNode, bring_up
 
     class OnboardNode(ManagedNode):
         def __init__(self):
-            po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
-                             start_parameter_services=param_services)
-            self.p = declare(self, PARAMS)
+            super().__init__(NODE_NAME, PARAMS, overrides, context=context, param_services=param_services)
             self._rt = None
             self._pool = None
 

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from hdphm import rosutil as ru
+import hd_ros as ru
 
 NODE_NAME = "prognostic"
 HEALTH_COLUMNS = ("stamp", "mission_index", "final", "h_mean", "h_p5", "h_p95", "rul_p5", "rul_p50", "rul_p95",
@@ -218,19 +218,15 @@ def load_obs_model(path: str):
 def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
               autostart: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.parameter import Parameter
     from std_msgs.msg import Float64MultiArray, String
 
-    from hd_onboard.node import declare, diag_status
+    from hd_ros.diagnostics import diag_status
 
-    from hdphm.managed import ManagedNode, bring_up
+    from hd_ros.managed import ManagedNode, bring_up
 
     class PrognosticNode(ManagedNode):
         def __init__(self):
-            po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
-                             start_parameter_services=param_services)
-            self.p = declare(self, PARAMS)
+            super().__init__(NODE_NAME, PARAMS, overrides, context=context, param_services=param_services)
 
         def configure(self):
             self.life = None

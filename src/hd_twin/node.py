@@ -20,7 +20,7 @@ and reference sanity: ``hd_onboard.detector`` ``from_dict``); a bad one is
 refused with a /diagnostics WARN naming the field, the state is unchanged, and
 a short summary goes to a bounded memory of refusals (:attr:`refusals`, the
 last :data:`MAX_REFUSALS`). No exception of a callback stops the node
-(``rosutil.contain_callbacks``).
+(``hd_ros.diagnostics.contain_callbacks``).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import json
 import time
 from typing import Any
 
-from hdphm import rosutil as ru
+import hd_ros as ru
 
 NODE_NAME = "twin"
 PARAMS: dict[str, Any] = {
@@ -155,19 +155,15 @@ def validate_references(refs, source: str = "update") -> dict:
 def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
               autostart: bool = True):
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.parameter import Parameter
     from std_msgs.msg import String
 
-    from hd_onboard.node import declare, diag_status
+    from hd_ros.diagnostics import diag_status
 
-    from hdphm.managed import ManagedNode, bring_up
+    from hd_ros.managed import ManagedNode, bring_up
 
     class TwinNode(ManagedNode):
         def __init__(self):
-            po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
-                             start_parameter_services=param_services)
-            self.p = declare(self, PARAMS)
+            super().__init__(NODE_NAME, PARAMS, overrides, context=context, param_services=param_services)
 
         def configure(self):
             from hd_twin import state as sv

@@ -22,13 +22,11 @@ stay in ``hd_twin.node`` (layering: hd_twin does not import hd_onboard).
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import re
 from typing import Any, Iterable
 
-import numpy as np
+from hd_bag.jsonsafe import json_depth, parse_json_object  # noqa: F401 - json_depth re-exported
 
 #: An update carries parameters, thresholds and references of some actuators: a few KiB. 1 MiB
 #: holds thresholds for thousands of actuators.
@@ -45,8 +43,6 @@ MAX_PATH = 4096
 KNOWN_KEYS = ("params", "thresholds", "references", "normalisation", "effects", "degradation_law", "model_dir",
               "model_version", "updated_by")
 
-_STRING_RE = re.compile(r'"(?:[^"\\]|\\.)*"', re.S)
-
 
 class UpdateError(ValueError):
     """A refused update or state: ``field`` is the dotted path of the offending field."""
@@ -56,38 +52,13 @@ class UpdateError(ValueError):
         super().__init__(f"{field}: {problem}" if field else problem)
 
 
-def json_depth(text: str) -> int:
-    """Deepest bracket nesting of a JSON text (strings skipped), without recursion."""
-    stripped = _STRING_RE.sub("", text)
-    a = np.frombuffer(stripped.encode("utf-8", "replace"), np.uint8)
-    if a.size == 0:
-        return 0
-    step = ((a == ord("{")) | (a == ord("["))).astype(np.int32) - ((a == ord("}")) | (a == ord("]"))).astype(np.int32)
-    return int(np.cumsum(step).max())
-
-
-def _no_constant(name: str):
-    raise ValueError(f"{name} is not a finite number (NaN/Infinity are not allowed)")
-
-
 def parse_json(text: Any, what: str, max_bytes: int = MAX_UPDATE_BYTES, max_depth: int = MAX_JSON_DEPTH) -> dict:
-    """A JSON object from ``text`` within the size and depth caps; ValueError naming ``what`` otherwise."""
-    if not isinstance(text, str):
-        raise UpdateError("", f"{what}: expected JSON text, got {type(text).__name__}")
-    if len(text) > max_bytes or len(text.encode("utf-8", "replace")) > max_bytes:
-        raise UpdateError("", f"{what}: {len(text)} characters, above the cap of {max_bytes} bytes")
-    d = json_depth(text)
-    if d > max_depth:
-        raise UpdateError("", f"{what}: JSON nested {d} deep, above the cap of {max_depth}")
+    """A JSON object from ``text`` within the size and depth caps (:func:`hd_bag.jsonsafe.parse_json_object`);
+    :class:`UpdateError` naming ``what`` otherwise."""
     try:
-        obj = json.loads(text, parse_constant=_no_constant)
-    except RecursionError:
-        raise UpdateError("", f"{what}: JSON nested too deep") from None
-    except ValueError as e:  # JSONDecodeError is a ValueError; so is _no_constant's
-        raise UpdateError("", f"{what}: not valid JSON ({e})") from None
-    if not isinstance(obj, dict):
-        raise UpdateError("", f"{what}: expected a JSON object, got {type(obj).__name__}")
-    return obj
+        return parse_json_object(text, what, max_bytes, max_depth)
+    except ValueError as e:
+        raise UpdateError("", str(e)) from None
 
 
 # ---- generic checks ----------------------------------------------------------------------------------

@@ -89,7 +89,7 @@ def _fit_life(fleet: Path, train_ids: list[str], truth: dict, out_json: Path, ar
 
 
 def _replay(bags: list[Path], model_dir: Path, life_json: Path, out_dir: Path) -> dict:
-    from hdphm.ros_cli import run_stack_on_bags
+    from hdphm.stack import run_stack_on_bags
 
     _say(f"4/5 replaying {len(bags)} missions of the held-out actuator through the ROS 2 stack, "
          f"recording one MCAP per mission under {out_dir}")
