@@ -132,7 +132,7 @@ def test_attach_events_drops_records_after_failure():
 
 def test_node_tracker_equals_batch(synth_fit):
     """The prognostic node's LifeTracker (one window row per mission here) gives batch's posterior."""
-    from hd_prognostic.node import PARAMS, LifeTracker
+    from hd_prognostic.tracker import TRACKER_DEFAULTS, LifeTracker
 
     _, _, m = synth_fit
     m = LifeModel(m.theta, m.E_ref, "load", "HF_MTW_IF", {}, m.fit_info)
@@ -141,7 +141,7 @@ def test_node_tracker_equals_batch(synth_fit):
     W = np.full(len(u.t), 1.0)  # load clock with W = 1 J per mission: E(k) = k
     u.events = UnitEvents()
     hb = predict_history(m, u, n_samples=200, seed=0)
-    tr = LifeTracker("U", m, dict(PARAMS, rul_particles=200))
+    tr = LifeTracker("U", m, dict(TRACKER_DEFAULTS, rul_particles=200))
     rows = []
     for k in range(len(u.t)):
         tr.mission_index = float(u.t[k])

@@ -40,7 +40,7 @@ def test_batch_and_node_give_the_same_observation(kind):
     from hd_onboard.core import OnboardConfig
     from hd_onboard.features import (OBS_WINDOW_S, onboard_window_features, mission_observation,
                                      mission_observation_features)
-    from hd_prognostic.node import PARAMS, ActuatorTracker
+    from hd_prognostic.tracker import TRACKER_DEFAULTS, ActuatorTracker
 
     assert OBS_WINDOW_S == OnboardConfig().window_s  # batch uses the onboard node's window length
     m = _mission(dropout=kind == "dropout", q_nan=kind == "no_torque_sensor")
@@ -50,7 +50,7 @@ def test_batch_and_node_give_the_same_observation(kind):
     assert [r["t_start"] for r in rows] == [w["t_start"] for w in batch_w]
     batch = mission_observation_features(m)
     # the node's own reduction (the tracker's), fed the onboard core's rows, without ROS
-    tr = ActuatorTracker("EMA-T", None, dict(PARAMS))
+    tr = ActuatorTracker("EMA-T", None, dict(TRACKER_DEFAULTS))
     tr.add_windows(rows)
     y_node, W_node = tr._mission_obs()
     assert math.isfinite(y_node) and y_node > 0 and W_node > 0
