@@ -55,7 +55,7 @@ ALLOWED_UPWARD: set[tuple[str, str]] = {
     #     (declare, diag_status) now come from hd_ros
     ("hd_twin.node", "hd_onboard.detector"),
     # R3: the onboard evaluation tooling calls the ground's per-actuator reference calibration (the
-    #     threshold circle is gone: hd_onboard.detector.robust_threshold serves both)
+    #     threshold circle is gone: hd_onboard.calibration.robust_threshold serves both)
     ("hd_onboard.evaluate", "hd_ground.references"),
     # R1: `python -m hd_sim.cli` runs the hdphm CLI (the plant's CLI entry goes with the CLI split)
     ("hd_sim.cli", "hdphm.cli"),

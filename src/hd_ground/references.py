@@ -10,11 +10,11 @@ actuator, on **all** their samples:
 * the residual lines (``hd_ground.thresholds.actuator_thresholds``, with the
   onboard configuration's EWMA time constant, persistence and minimum lines);
 * the healthy torsion law ``twist = a + b tanh(omega_m/eps) + g(Q)``
-  (:func:`hd_onboard.detector.fit_stiffness_reference`, the function the
+  (:func:`hd_onboard.detectors.stiffness.fit_stiffness_reference`, the function the
   onboard warm-up uses; one offset per mission: encoders need not share a
   zero across missions);
 * the healthy friction mismatch ``r_Q = a + b tanh(omega_m/eps)``
-  (:func:`hd_onboard.detector.fit_friction_reference`, one offset per
+  (:func:`hd_onboard.detectors.friction.fit_friction_reference`, one offset per
   mission), on the output-torque residual of the same twin (parameters and
   model) the onboard node will run, with ``scale = N T_C`` of those parameters.
 
@@ -78,7 +78,8 @@ def actuator_references(missions: Sequence, results: Sequence[dict], params, con
     (``eps_omega``, ``N T_C`` for the friction scale); ``config``: :class:`hd_onboard.core.OnboardConfig`.
     """
     from hd_onboard.core import OnboardConfig
-    from hd_onboard.detector import fit_friction_reference, fit_stiffness_reference
+    from hd_onboard.detectors.friction import fit_friction_reference
+    from hd_onboard.detectors.stiffness import fit_stiffness_reference
 
     cfg = config or OnboardConfig()
     s = reference_samples(missions, results, params)

@@ -25,7 +25,7 @@ Residual channels (measured - expected):
   (encoder zero offsets). Lost motion, backlash and kinematic-error growth
   show here.
 
-Each channel is normalised and tested by :mod:`hd_onboard.detector`. Every
+Each channel is normalised and tested by :mod:`hd_onboard.detectors`. Every
 ``window_s`` of sample time the core closes a window: residual statistics
 per channel and, when available, the prognostic features of
 ``hd_onboard.features``; these rows go to the prognostic node.
@@ -52,17 +52,19 @@ from typing import Any
 
 import numpy as np
 
-from hd_onboard.detector import (ERROR, OK, WARN, ChannelDetector, ChannelThreshold, FrictionMonitor, LevelLatch,
-                                  FrictionReference, StiffnessMonitor, StiffnessReference, fit_friction_reference,
-                                  fit_stiffness_reference)
+from hd_onboard.calibration import calibrate_channel
+from hd_onboard.detectors.ewma import ChannelDetector, ChannelThreshold
+from hd_onboard.detectors.friction import FrictionMonitor, FrictionReference, fit_friction_reference
+from hd_onboard.detectors.levels import ERROR, OK, WARN, LevelLatch, run_lengths
+from hd_onboard.detectors.stiffness import StiffnessMonitor, StiffnessReference, fit_stiffness_reference
 from hd_onboard.expected import I_REF, I_TEMP, PhysicsStandInExpected
 from hd_twin import physics as ph
 
 JS_COLS = ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red")
 CHANNELS = ("Q_red", "twist")
 #: columns of the residual table published on /hd/onboard/residuals
-#: (``stiff_loss``: torsional-stiffness loss estimate 1 - 1/s of :class:`hd_onboard.detector.StiffnessMonitor`, NaN
-#: where not evaluable; ``fric_excess``: friction excess of :class:`hd_onboard.detector.FrictionMonitor`, extra
+#: (``stiff_loss``: torsional-stiffness loss estimate 1 - 1/s of :class:`hd_onboard.detectors.stiffness.StiffnessMonitor`, NaN
+#: where not evaluable; ``fric_excess``: friction excess of :class:`hd_onboard.detectors.friction.FrictionMonitor`, extra
 #: output-referred friction torque in units of the twin's N*T_C, NaN where not evaluable or Q_red is not measured)
 RESIDUAL_COLUMNS = ("stamp", "Q_red", "Q_red_hat", "r_Q_red", "e_Q_red", "r_twist", "e_twist", "level", "stiff_loss",
                     "fric_excess")
@@ -93,14 +95,14 @@ class OnboardConfig:
     warn_margin: float = 1.5
     error_margin: float = 3.0
     sigma_floor_rel: float = 0.0  # -, self-calibration: sigma >= rel * std of the warm-up's output torque (twist: / K_out)
-    # torsional-stiffness monitor (hd_onboard.detector.StiffnessMonitor); reference law learnt on the warm-up
+    # torsional-stiffness monitor (hd_onboard.detectors.stiffness.StiffnessMonitor); reference law learnt on the warm-up
     stiff_tau_s: float = 4.0  # s, forgetting time constant of the twist-vs-torque regression
     stiff_loss_warn: float = 0.15  # -, fraction of effective torsional stiffness lost -> WARN
     stiff_loss_error: float = 0.3  # -, -> ERROR
     stiff_persistence_s: float = 1.0  # s of consecutive evaluable samples above the line
     stiff_min_excitation: float = 0.5  # -, loaded-window gate: weighted std of g(Q) / the reference's
     stiff_eps_omega: float = 1.0  # rad/s, direction term tanh(omega_m / eps)
-    # friction (lubrication) monitor (hd_onboard.detector.FrictionMonitor); reference learnt on the warm-up. Chosen on
+    # friction (lubrication) monitor (hd_onboard.detectors.friction.FrictionMonitor); reference learnt on the warm-up. Chosen on
     # the tune fleet and unit 1 (healthy excess peaks <= 1.95, lubrication loss 2-3 >= 3.6), scored on unit 2.
     fric_tau_s: float = 2.0  # s, forgetting time constant of the residual-vs-direction regression
     fric_excess_warn: float = 2.5  # -, extra friction torque / (N T_C of the twin) -> WARN
@@ -573,8 +575,6 @@ class OnboardCore:
         reset_at = gap.copy()
         if not valid.all():
             self.health.n_nan += int((~valid).sum())
-            from hd_onboard.detector import run_lengths
-
             runs = run_lengths(~valid, nanrun)
             after = np.concatenate([[nanrun], runs[:-1]])
             reset_at |= valid & (after > cfg.max_gap_samples)
@@ -722,8 +722,6 @@ class OnboardCore:
 
     def _self_calibrate(self, t: np.ndarray, res: dict[str, np.ndarray]) -> None:
         """Lines from the first ``warmup_s`` of the mission (used only when the ground gave none)."""
-        from hd_onboard.detector import calibrate_channel
-
         cfg = self.cfg
         for c in CHANNELS:
             if c in self._given_thresholds:

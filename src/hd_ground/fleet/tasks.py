@@ -132,7 +132,7 @@ def _params(calib: dict | None):
 
 def _onboard_core(calib: dict | None, mission, opts: FleetOptions):
     from hd_onboard.core import OnboardCore
-    from hd_onboard.detector import ChannelThreshold
+    from hd_onboard.detectors.ewma import ChannelThreshold
     from hd_onboard.expected import make_expected
 
     cfg = opts.onboard_config()
