@@ -76,13 +76,13 @@ def core_bench(a) -> None:
 
     from hd_onboard.core import OnboardCore, run_mission, window_row
     from hd_onboard.expected import make_expected
-    from hd_onboard.node import _feature_fn
+    from hd_onboard.features import window_feature_fn
     from hd_twin import physics as ph
 
     m = make_mission(duration=a.seconds, seed=0, fault_at=a.seconds * 0.7)
     stamps = m.t0_ns + np.round(m.t * 1e9).astype(np.int64)
     V = np.column_stack([m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red])
-    ff = _feature_fn({}, m.meta.gear_ratio)
+    ff = window_feature_fn({}, m.meta.gear_ratio)
     kinds = [("standin", "")] + ([("onnx", a.model_dir)] if a.model_dir else [])
     for kind, md in kinds:
         p = ph.TwinParams.from_yaml().with_meta(gear_ratio=m.meta.gear_ratio)

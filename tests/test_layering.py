@@ -50,10 +50,8 @@ def allowed_packages(pkg: str) -> set[str]:
 #   R3 = requirement 3 (one robust-threshold function: the onboard <-> ground circle gone).
 ALLOWED_UPWARD: set[tuple[str, str]] = {
     # R1 done: the ROS plumbing (hdphm.rosutil, hdphm.managed, replay/record) moved down to hd_ros
-    # R2: the twin node validates states with the detector's ChannelThreshold / StiffnessReference /
-    #     FrictionReference (validation moves to hd_twin/state.py); its borrowed node helpers
-    #     (declare, diag_status) now come from hd_ros
-    ("hd_twin.node", "hd_onboard.detector"),
+    # R2 done: the node shells import downwards only (twin-state records and merging in hd_twin,
+    #     node helpers in hd_ros)
     # R3: the onboard evaluation tooling calls the ground's per-actuator reference calibration (the
     #     threshold circle is gone: hd_onboard.calibration.robust_threshold serves both)
     ("hd_onboard.evaluate", "hd_ground.references"),

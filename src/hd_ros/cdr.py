@@ -78,7 +78,7 @@ def decode_joint_state(buf: bytes) -> tuple[int, str, list[str], np.ndarray, np.
 _LAYOUTS: dict[int, Any] = {}
 
 
-def decode_joint_states(msgs: list[bytes]) -> tuple[np.ndarray, np.ndarray, str, list[str]]:
+def decode_joint_states(msgs: list[bytes], vectorise_min: int = 2) -> tuple[np.ndarray, np.ndarray, str, list[str]]:
     """Decode a batch of CDR JointStates at once -> (stamps_ns (n,), V (n, 6), frame_id, problems).
 
     ``V`` columns: position[0:2], velocity[0:2], effort[0:2] (NaN where an
@@ -86,7 +86,9 @@ def decode_joint_states(msgs: list[bytes]) -> tuple[np.ndarray, np.ndarray, str,
     of their length (``hd_bag.cdr``: same frame, names and array lengths) are
     decoded with one numpy step; the rest one by one with
     :func:`decode_joint_state`. Undecodable messages are left out and named in
-    ``problems`` (stamps and rows of the others keep arrival order).
+    ``problems`` (stamps and rows of the others keep arrival order). A batch of fewer than
+    ``vectorise_min`` messages is decoded one by one (no layout matching: the cheaper path for the
+    few messages a live callback takes at 1 kHz); the values are the same either way.
     """
     from hd_bag.cdr import decode_doubles, decode_stamps, match_layout, parse_jointstate_layout
 
@@ -96,27 +98,33 @@ def decode_joint_states(msgs: list[bytes]) -> tuple[np.ndarray, np.ndarray, str,
     ok = np.zeros(n, bool)
     problems: list[str] = []
     frame = ""
-    lens = np.fromiter((len(m) for m in msgs), np.int64, n)
-    for L in np.unique(lens).tolist():
-        idx = np.flatnonzero(lens == L)
-        lay = _LAYOUTS.get(L)
-        first = msgs[int(idx[0])]
-        if lay is None or not match_layout(np.frombuffer(first, np.uint8)[None, :], lay)[0]:
-            lay = parse_jointstate_layout(first)
-            if lay is not None:
-                _LAYOUTS[L] = lay
-        slow = idx
-        if lay is not None and len(idx) > 1:
-            rows = np.frombuffer(b"".join(msgs[i] for i in idx.tolist()), np.uint8).reshape(len(idx), L)
-            good = match_layout(rows, lay)
-            gi = idx[good]
-            stamps[gi] = decode_stamps(rows[good])
-            for c0, off, k in zip((0, 2, 4), lay.offsets, lay.counts):
-                if k >= 1:
-                    V[gi, c0:c0 + min(k, 2)] = decode_doubles(rows[good], off, min(k, 2))
-            ok[gi] = True
-            frame = frame or lay.frame_id
-            slow = idx[~good]
+    if n < vectorise_min:
+        groups = [(None, np.arange(n))]
+    else:
+        lens = np.fromiter((len(m) for m in msgs), np.int64, n)
+        groups = [(L, np.flatnonzero(lens == L)) for L in np.unique(lens).tolist()]
+    for L, idx in groups:
+        if L is None:
+            slow = idx
+        else:
+            lay = _LAYOUTS.get(L)
+            first = msgs[int(idx[0])]
+            if lay is None or not match_layout(np.frombuffer(first, np.uint8)[None, :], lay)[0]:
+                lay = parse_jointstate_layout(first)
+                if lay is not None:
+                    _LAYOUTS[L] = lay
+            slow = idx
+            if lay is not None and len(idx) > 1:
+                rows = np.frombuffer(b"".join(msgs[i] for i in idx.tolist()), np.uint8).reshape(len(idx), L)
+                good = match_layout(rows, lay)
+                gi = idx[good]
+                stamps[gi] = decode_stamps(rows[good])
+                for c0, off, k in zip((0, 2, 4), lay.offsets, lay.counts):
+                    if k >= 1:
+                        V[gi, c0:c0 + min(k, 2)] = decode_doubles(rows[good], off, min(k, 2))
+                ok[gi] = True
+                frame = frame or lay.frame_id
+                slow = idx[~good]
         for i in slow.tolist():
             try:
                 s_, fr, _, pos, vel, eff = decode_joint_state(msgs[i])

@@ -8,7 +8,7 @@ from tests.onboard.simfix import faulted_mission, sim_mission
 
 from hd_onboard.core import OnboardCore, run_mission, window_row  # noqa: E402
 from hd_onboard.detectors.levels import ERROR, OK, WARN  # noqa: E402
-from hd_onboard.node import _feature_fn  # noqa: E402
+from hd_onboard.features import window_feature_fn  # noqa: E402
 
 #: stated detection delay of a sudden grease loss (friction x4, lubrication_loss severity 3, hd_sim's
 #: mid-mission fault hook, 50 ms ramp) with the physics stand-in twin. Measured over 8 sim missions
@@ -58,7 +58,7 @@ def test_short_path_equals_block_path_on_messy_sim_data():
     keep[6000:6040] = False  # 40 ms dropout: twin reset
     stamps, V = stamps[keep], V[keep]
     stamps[7000] = stamps[6999]  # duplicate stamp: dropped
-    ff = _feature_fn({}, m.meta.gear_ratio)
+    ff = window_feature_fn({}, m.meta.gear_ratio)
     a = OnboardCore(gear_ratio=m.meta.gear_ratio, feature_fn=ff)
     tabs, wins, events = [], [], []
     for i in range(0, len(stamps), 700):

@@ -28,10 +28,10 @@ def _mission(h_um=20.0, seed=1, duration=6.0, dropout=False, q_nan=False):
 def _node_rows(m):
     """The rows the prognostic node receives: the onboard core with the onboard node's feature function."""
     from hd_onboard.core import OnboardCore, run_mission
-    from hd_onboard.node import _feature_fn
+    from hd_onboard.features import window_feature_fn
 
     core = OnboardCore(gear_ratio=m.meta.gear_ratio,
-                       feature_fn=_feature_fn({"torque_constant": m.meta.torque_constant}, m.meta.gear_ratio))
+                       feature_fn=window_feature_fn({"torque_constant": m.meta.torque_constant}, m.meta.gear_ratio))
     return run_mission(m, core)["windows"]
 
 

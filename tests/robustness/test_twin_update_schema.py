@@ -9,7 +9,7 @@ import os
 import pytest
 
 from hd_twin import state as sv
-from hd_twin.node import apply_update, initial_state
+from hd_twin.state import apply_update, initial_state
 
 from .hostile_updates import HOSTILE_UPDATES
 
