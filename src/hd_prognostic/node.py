@@ -3,7 +3,7 @@
 Subscribes ``/hd/onboard/features`` (window rows: ``feat.HF_MTW_IF``,
 ``feat.W_load`` and residual statistics), ``/hd/mission`` (mission
 boundaries). Per actuator it keeps one particle filter of the Archard wear
-model (:class:`hd_prognostic.tracker.ActuatorTracker`: ``hd_prognostic.hd.build_model`` on the observation model file,
+model (:class:`hd_prognostic.tracker.ActuatorTracker`: ``hd_prognostic.pipeline.build_model`` on the observation model file,
 parameter ``obs_model``; default ``hd_prognostic/default_obs_model.json``)
 and makes **one filter step per mission**, as the batch prognosis does, with
 the same reduction of the window rows (``hd_onboard.features.mission_observation``,

@@ -2,7 +2,7 @@
 
 Shared by the prognostic node (:mod:`hd_prognostic.node`, which only converts messages) and the tests
 that hold it equal to batch: :class:`ActuatorTracker` (particle filter of the Archard wear model on an
-observation model, the batch filter's settings :func:`hd_prognostic.hd.pf_settings`),
+observation model, the batch filter's settings :func:`hd_prognostic.pipeline.pf_settings`),
 :class:`LifeTracker` (the fleet life model, :mod:`hd_prognostic.lifemodel`), and :class:`MissionRouter`
 (mission boundaries: ``/hd/mission`` announcements and the onboard's ``mission_index`` / ``final``
 window columns decide which mission a row belongs to and when a mission's step is committed).
@@ -44,11 +44,11 @@ class ActuatorTracker:
         self.mission_index = math.nan
         self.windows: list[dict] = []
         if obs is not None:
-            from hd_prognostic.hd import build_model, pf_settings
+            from hd_prognostic.pipeline import build_model, pf_settings
             from hd_prognostic.pf import ParticleFilter
 
             self.model = build_model(obs)
-            # the batch filter's settings (hd_prognostic.hd.pf_settings), one step per mission as batch
+            # the batch filter's settings (hd_prognostic.pipeline.pf_settings), one step per mission as batch
             self.pf = ParticleFilter(self.model, **pf_settings(obs), n_particles=int(p["n_particles"]), seed=int(p["seed"]))
 
     def add_windows(self, rows: list[dict]) -> None:

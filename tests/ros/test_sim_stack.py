@@ -32,7 +32,7 @@ FAULT_DELAY_S = 2.0
 def fleet(tmp_path_factory):
     import torch
 
-    from hd_prognostic.hd import extract_actuator, fit_population
+    from hd_prognostic.pipeline import extract_actuator, fit_population
     from hd_sim import simulate_fleet
     from hd_twin.train import TrainConfig, train_twin
 

@@ -1,4 +1,4 @@
-"""Harmonic-drive prognosis from an actuator's bags: features -> Archard PF -> RUL per mission.
+"""The per-actuator prognosis pipeline, from an actuator's bags: features -> Archard PF -> RUL per mission.
 
 * :func:`extract_actuator` reads every bag of one actuator (contract topics
   only; ``/sim/health`` only with ``include_truth=True``, which the
