@@ -38,14 +38,12 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64MultiArray, String
 
 import hd_ros as ru
-from hd_onboard.core import CHANNELS, RESIDUAL_COLUMNS, OnboardConfig, OnboardCore
+from hd_onboard.core import CHANNELS, RESIDUAL_COLUMNS, OnboardConfig
 from hd_onboard.detectors.levels import LEVEL_NAMES, OK
-from hd_onboard.expected import make_expected
-from hd_onboard.features import window_feature_fn
+from hd_onboard.session import OnboardSession
 from hd_onboard.status import onboard_statuses
 from hd_onboard.windowpool import WindowFeaturePool
 from hd_ros.managed import ManagedNode, bring_up
-from hd_twin import physics as ph
 from hd_twin import state as sv
 
 NODE_NAME = "onboard"
@@ -90,14 +88,10 @@ class OnboardNode(ManagedNode):
         self._pool = None
 
     def configure(self):
-        self.cfg = OnboardConfig(**{k: self.p[k] for k in OnboardConfig.__dataclass_fields__ if k in self.p}).validate()
-        self.twin_params = ph.TwinParams.from_yaml()
-        self.twin_state: dict = {}
-        self.thresholds_all: dict[str, dict[str, Any]] = {}  # actuator -> channel -> ChannelThreshold
-        self.references_all: dict[str, dict[str, Any]] = {}  # actuator -> {"stiffness"/"friction": reference}
-        self.hardware_id = self.p["actuator_id"] or ""
-        self.meta: dict = {}
-        self.core = None
+        cfg = OnboardConfig(**{k: self.p[k] for k in OnboardConfig.__dataclass_fields__ if k in self.p}).validate()
+        #: this actuator's monitoring: core, twin, lines, references, mission metadata (hd_onboard.session)
+        self.session = OnboardSession(cfg, self.p["model_dir"], self.p["gear_ratio"], self.p["actuator_id"] or "",
+                                      log=lambda s: self.get_logger().warning(s))
         self.n_msgs = {t: 0 for t in ru.CONTRACT_TOPICS}  # decoded messages
         self.n_taken = {t: 0 for t in ru.CONTRACT_TOPICS}  # messages taken from DDS (decodable or not)
         self.n_mission_msgs = 0  # /hd/mission messages taken
@@ -171,20 +165,22 @@ class OnboardNode(ManagedNode):
         with self._lock:
             self._on_js(first)
 
+    # ---- the session's state, as attributes (tests, the stack's summary) ---------------------------
+    core = property(lambda self: self.session.core)
+    meta = property(lambda self: self.session.meta)
+    hardware_id = property(lambda self: self.session.hardware_id)
+    thresholds_all = property(lambda self: self.session.thresholds_all)
+    references_all = property(lambda self: self.session.references_all)
+    twin_params = property(lambda self: self.session.twin_params)
+    twin_state = property(lambda self: self.session.twin_state)
+
     # ---- core and mission -------------------------------------------------------------------------
-    def _new_core(self):
-        N = float(self.meta.get("gear_ratio") or self.p["gear_ratio"] or self.twin_params.N)
-        params = self.twin_params.with_meta(gear_ratio=N)
-        model_dir = self.twin_state.get("model_dir") or self.p["model_dir"]
-        # rate unknown until the core has measured it (it then configures the twin or falls back, noted)
-        exp = make_expected(model_dir, params, fs_hz=self.cfg.nominal_fs or None, log=lambda s: self.get_logger().warning(s))
-        if getattr(exp, "fallback_reason", ""):
-            self.input_problems.append(("twin_load", 2, exp.fallback_reason))
-            self._error(exp.fallback_reason)
-        self.core = OnboardCore(exp, params, None, self.thresholds_all.get(self.hardware_id), self.cfg,
-                                feature_fn=window_feature_fn(self.meta, N))
-        self._apply_references()
-        self.core.defer_windows = True
+    def _new_core(self, why: str | None = None):
+        """After the session started a core (``why``: its twin fell back): report, reset the published level."""
+        why = self.session.new_core() if why is None else why
+        if why:
+            self.input_problems.append(("twin_load", 2, why))
+            self._error(why)
         self.last_diag_t = -math.inf
         self.level = OK
 
@@ -197,9 +193,7 @@ class OnboardNode(ManagedNode):
                 self._error(f"{ru.TOPIC_MISSION}: {e}")
                 return
             self.close_mission()
-            self.meta = meta
-            self.hardware_id = str(meta.get("actuator_id") or self.hardware_id or "unknown")
-            self._new_core()
+            self._new_core(self.session.start_mission(meta))
             self.get_logger().debug(f"mission {meta.get('mission_index')} of {self.hardware_id}: core reset")
 
     def _poll_mission(self):
@@ -226,30 +220,14 @@ class OnboardNode(ManagedNode):
     def _on_twin(self, msg):
         try:
             roots = sv.model_roots(self.p.get("model_roots", ""), self.p["model_dir"])
-            st, params, ths, refs = sv.read_state(msg.data, ru.TOPIC_TWIN_STATE, roots, self.twin_params, CHANNELS)
+            st, params, ths, refs = sv.read_state(msg.data, ru.TOPIC_TWIN_STATE, roots, self.session.twin_params, CHANNELS)
         except ValueError as e:
             self._error(f"twin update refused: {e}")
             return
-        model_changed = (st.get("model_dir") or "") != (self.twin_state.get("model_dir") or "")
-        old_refs = self.references_all.get(self.hardware_id)
-        self.twin_state, self.twin_params, self.thresholds_all, self.references_all = st, params, ths, refs
-        if model_changed and self.core is not None and self.core.last_ns is None:
-            self._new_core()
-        elif self.core is not None:
-            self.core.set_params(params)
-            if self.hardware_id in ths:
-                self.core.set_thresholds(ths[self.hardware_id])
-            if refs.get(self.hardware_id) != old_refs:  # a new reference restarts that monitor's moments
-                self._apply_references()
+        why = self.session.apply_state(st, params, ths, refs)
+        if why is not None:  # a new twin model: a new core
+            self._new_core(why)
         self.get_logger().info(f"twin state revision {st.get('revision')} applied")
-
-    def _apply_references(self):
-        """This actuator's ground references (if any) to the core, exactly as its thresholds."""
-        refs = self.references_all.get(self.hardware_id) or {}
-        if "stiffness" in refs:
-            self.core.set_stiffness_reference(refs["stiffness"])
-        if "friction" in refs:
-            self.core.set_friction_reference(refs["friction"])
 
     # ---- inputs -----------------------------------------------------------------------------------
     def _on_js(self, first):
@@ -265,27 +243,14 @@ class OnboardNode(ManagedNode):
         if not self.meta:  # a (re)started node: the latched mission may be queued behind the samples
             self._poll_mission()
         if not self.hardware_id and frame:
-            self.hardware_id = frame
+            self.session.hardware_id = frame
         n_ok = len(stamps)
         self.n_msgs[ru.TOPIC_JOINT_STATES] += n_ok
         self.last_wall[ru.TOPIC_JOINT_STATES] = time.monotonic()
+        self.session.push_samples(stamps, V, short, int(self.p["max_block"]), lambda: self.level,
+                                  lambda: self._after_samples(force_rows=True),
+                                  self.latency_ns if self.p["latency_probe"] else None)
         core = self.core
-        if n_ok <= short:  # per sample: the flag decision right after each sample
-            probe = self.p["latency_probe"]
-            for s_, v_ in zip(stamps.tolist(), V.tolist()):
-                if core.push_one(s_, v_) != self.level:
-                    self._after_samples(force_rows=True)
-                if probe:
-                    self.latency_ns.append(time.time_ns() - s_)
-        else:
-            mb = int(self.p["max_block"])
-            for a in range(0, n_ok, mb):
-                r = core.push(stamps[a:a + mb], V[a:a + mb])
-                if len(r.table):
-                    core.rows.extend(r.table)
-                core.events.extend(r.events)
-                core.windows.extend(r.windows)
-                self._after_samples(force_rows=True)
         if n_ok:
             self.last_stamp[ru.TOPIC_JOINT_STATES] = int(core.last_ns) if core.last_ns is not None else None
         self._after_samples()
@@ -300,10 +265,7 @@ class OnboardNode(ManagedNode):
         self.n_msgs[ru.TOPIC_COMMAND] += len(stamps)
         if len(stamps):
             self.last_stamp[ru.TOPIC_COMMAND] = int(stamps[-1])
-        has = np.flatnonzero(~np.isnan(V[:, 0]))
-        if len(has):  # the core keeps the latest reference only; a command without a position is counted
-            i = int(has[-1])
-            self.core.push_command(int(stamps[i]), float(V[i, 0]))
+        self.session.push_commands(stamps, V)
         self.last_wall[ru.TOPIC_COMMAND] = time.monotonic()
 
     def _on_temp(self, first):
@@ -317,9 +279,7 @@ class OnboardNode(ManagedNode):
                 continue
             self.n_msgs[ru.TOPIC_TEMPERATURE] += 1
             self.last_stamp[ru.TOPIC_TEMPERATURE] = s
-            if frame == "gearbox" or self.meta.get("_temp_frame") in (None, frame):
-                self.meta["_temp_frame"] = frame
-                self.core.push_temperature(s, v)
+            self.session.push_temperature(s, frame, v)
         self.last_wall[ru.TOPIC_TEMPERATURE] = time.monotonic()
 
     # ---- outputs ----------------------------------------------------------------------------------

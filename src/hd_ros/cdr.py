@@ -99,7 +99,7 @@ def decode_joint_states(msgs: list[bytes], vectorise_min: int = 2) -> tuple[np.n
     problems: list[str] = []
     frame = ""
     if n < vectorise_min:
-        groups = [(None, np.arange(n))]
+        groups = [(None, range(n))]
     else:
         lens = np.fromiter((len(m) for m in msgs), np.int64, n)
         groups = [(L, np.flatnonzero(lens == L)) for L in np.unique(lens).tolist()]
@@ -125,7 +125,7 @@ def decode_joint_states(msgs: list[bytes], vectorise_min: int = 2) -> tuple[np.n
                 ok[gi] = True
                 frame = frame or lay.frame_id
                 slow = idx[~good]
-        for i in slow.tolist():
+        for i in (slow if isinstance(slow, range) else slow.tolist()):
             try:
                 s_, fr, _, pos, vel, eff = decode_joint_state(msgs[i])
             except CdrError as e:
