@@ -52,12 +52,12 @@ def channel_threshold(segments: Iterable[np.ndarray], *, fs: float, ewma_tau_s: 
 
 def actuator_thresholds(results: Sequence[dict], *, channels: Sequence[str] = ("Q_red", "twist"),
                         fs: float | None = None, **kw) -> dict[str, ChannelThreshold]:
-    """Per-channel thresholds of one actuator from batch onboard results (:func:`hd_onboard.core.run_mission`).
+    """Per-channel thresholds of one actuator from batch onboard results (:func:`hd_onboard.batch.run_mission`).
 
     Each result's residual table gives one segment per channel (columns
     ``r_Q_red`` and ``r_twist``); ``fs`` defaults to the median stamp rate.
     """
-    from hd_onboard.core import RESIDUAL_COLUMNS
+    from hd_onboard.residuals import RESIDUAL_COLUMNS
 
     col = {"Q_red": RESIDUAL_COLUMNS.index("r_Q_red"), "twist": RESIDUAL_COLUMNS.index("r_twist")}
     out: dict[str, ChannelThreshold] = {}

@@ -2,7 +2,7 @@
 
 ``hdphm onboard eval PATH... [--ground K] [--model-dir DIR] [--out DIR]``
 
-Every bag is streamed through :func:`hd_onboard.core.run_mission` exactly as
+Every bag is streamed through :func:`hd_onboard.batch.run_mission` exactly as
 the onboard node would process it (same core, same thresholds logic). Two
 threshold modes:
 
@@ -33,7 +33,10 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from hd_onboard.core import CHANNELS, OnboardConfig, OnboardCore, run_mission
+from hd_onboard.batch import run_mission
+from hd_onboard.config import OnboardConfig
+from hd_onboard.core import OnboardCore
+from hd_onboard.residuals import CHANNELS
 from hd_onboard.detectors.levels import ERROR, WARN
 
 

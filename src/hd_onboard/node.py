@@ -14,7 +14,7 @@ mission resets the core; hardware_id = its actuator_id), ``/hd/twin/state``
 stiffness/friction monitor references: a ground reference for this node's
 actuator wins over the warm-up's, status ``reference`` = "ground").
 Publishes: ``/hd/onboard/residuals`` (Float64MultiArray rows, columns
-``hd_onboard.core.RESIDUAL_COLUMNS``, one message per processed block),
+``hd_onboard.residuals.RESIDUAL_COLUMNS``, one message per processed block),
 ``/hd/onboard/features`` (one row per closed window: residual statistics and
 features), ``/diagnostics`` (stable names ``hdphm/onboard/...``, see
 ``docs/INTERFACES.md``) on every level change and every
@@ -38,8 +38,9 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64MultiArray, String
 
 import hd_ros as ru
-from hd_onboard.core import CHANNELS, RESIDUAL_COLUMNS, OnboardConfig
+from hd_onboard.config import OnboardConfig
 from hd_onboard.detectors.levels import LEVEL_NAMES, OK
+from hd_onboard.residuals import CHANNELS, RESIDUAL_COLUMNS
 from hd_onboard.session import OnboardSession
 from hd_onboard.status import onboard_statuses
 from hd_onboard.windowpool import WindowFeaturePool
@@ -64,16 +65,6 @@ PARAMS: dict[str, Any] = {
     "rt_priority": 0,  # 1-99: the joint-state thread (rt_thread) runs SCHED_FIFO at this priority (0: normal)
     "latency_probe": False,  # bench only: record wall-clock now - header.stamp per sample (stamps must be wall time)
 }
-
-
-def _config_params() -> dict[str, Any]:
-    """Every :class:`hd_onboard.core.OnboardConfig` field as a node parameter, with the core's default
-    (one source for detection settings: the node never carries its own copy of them)."""
-    import dataclasses
-
-    from hd_onboard.core import OnboardConfig
-
-    return {f.name: f.default for f in dataclasses.fields(OnboardConfig)}
 
 
 #: every OnboardConfig field is a node parameter with the core's default (one source for detection

@@ -14,7 +14,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hd_onboard.core import OnboardConfig, OnboardCore
+from hd_onboard.config import OnboardConfig
+from hd_onboard.core import OnboardCore
 from hd_onboard.expected import make_expected
 from hd_onboard.features import window_feature_fn
 from hd_twin import physics as ph

@@ -31,9 +31,9 @@ class WindowFeaturePool:
         return len(self._pending)
 
     def submit(self, jobs: list, feature_fn: Callable | None, mission_index: Any, final: bool = False) -> None:
-        """Queue the rows of ``jobs`` (``hd_onboard.core.window_row``); with ``final`` the last one is marked
+        """Queue the rows of ``jobs`` (``hd_onboard.windows.window_row``); with ``final`` the last one is marked
         as the mission's last window (column ``final`` = 1, the prognostic node commits the mission on it)."""
-        from hd_onboard.core import window_row
+        from hd_onboard.windows import window_row
 
         mi = _float_or_nan(mission_index)
         for k, job in enumerate(jobs):

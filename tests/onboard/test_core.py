@@ -5,7 +5,10 @@ import pytest
 
 from tests.onboard.synth import make_mission  # noqa: E402
 
-from hd_onboard.core import OnboardConfig, OnboardCore, run_mission, RESIDUAL_COLUMNS  # noqa: E402
+from hd_onboard.batch import run_mission  # noqa: E402
+from hd_onboard.config import OnboardConfig  # noqa: E402
+from hd_onboard.core import OnboardCore  # noqa: E402
+from hd_onboard.residuals import RESIDUAL_COLUMNS  # noqa: E402
 from hd_onboard.detectors.ewma import ChannelThreshold, ewma  # noqa: E402
 from hd_onboard.detectors.levels import ERROR, OK, WARN, LevelLatch, run_lengths  # noqa: E402
 from hd_ground.thresholds import actuator_thresholds, channel_threshold, persistent_peak  # noqa: E402

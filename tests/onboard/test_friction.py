@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hd_onboard.core import OnboardConfig
+from hd_onboard.config import OnboardConfig
 from hd_onboard.detectors.friction import FrictionMonitor, fit_friction_reference
 from hd_onboard.detectors.levels import ERROR, OK
 

@@ -6,7 +6,9 @@ import pytest
 
 from tests.onboard.simfix import faulted_mission, sim_mission
 
-from hd_onboard.core import OnboardCore, run_mission, window_row  # noqa: E402
+from hd_onboard.batch import run_mission  # noqa: E402
+from hd_onboard.core import OnboardCore  # noqa: E402
+from hd_onboard.windows import window_row  # noqa: E402
 from hd_onboard.detectors.levels import ERROR, OK, WARN  # noqa: E402
 from hd_onboard.features import window_feature_fn  # noqa: E402
 
