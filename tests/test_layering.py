@@ -15,9 +15,9 @@ Every import counts: module level, inside functions, under ``if TYPE_CHECKING`` 
 Imports are read with :mod:`ast` (nothing is imported), relative imports are resolved, and
 ``from pkg import mod`` counts as an import of the module ``pkg.mod``.
 
-``ALLOWED`` lists the violations the code had when this test was written, each with the
-requirement of issue 16 that removes it. The test fails on any violation not in it and on any
-entry that is no longer needed: the list can only shrink.
+``ALLOWED_UPWARD`` / ``ALLOWED_CYCLES`` listed the violations the code had when this test was
+written, each with the requirement of issue 16 that removed it; both are empty now. The test fails
+on any violation not in them and on any entry that is no longer needed: the lists can only shrink.
 """
 
 from __future__ import annotations
@@ -43,20 +43,13 @@ def allowed_packages(pkg: str) -> set[str]:
     return lower | {PLANT} if pkg == "hdphm" else lower
 
 
-# Existing upward imports, (importing module, imported module). Each is removed by issue 16:
-#   R1 = requirement 1 (hd_ros bottom layer: rosutil/managed/replay/record leave hdphm; the stack
-#        assembling the nodes moves to hdphm/stack.py; nodes import downwards only),
-#   R2 = requirement 2 (node shells; shared pure helpers move down: hd_twin/state.py, trackers),
-#   R3 = requirement 3 (one robust-threshold function: the onboard <-> ground circle gone).
-ALLOWED_UPWARD: set[tuple[str, str]] = {
-    # R1 done: the ROS plumbing (hdphm.rosutil, hdphm.managed, replay/record) moved down to hd_ros
-    # R2 done: the node shells import downwards only (twin-state records and merging in hd_twin,
-    #     node helpers in hd_ros)
-    # R3: the onboard evaluation tooling calls the ground's per-actuator reference calibration (the
-    #     threshold circle is gone: hd_onboard.calibration.robust_threshold serves both)
-    ("hd_onboard.evaluate", "hd_ground.references"),
-    # R1 done: `python -m hd_sim.cli` builds its own parser from register() (no import of hdphm.cli)
-}
+# Upward imports still allowed, (importing module, imported module). Empty: issue 16 removed every
+# one the code had (R1: the ROS plumbing, rosutil/managed/replay/record, moved down to hd_ros and the
+# stack to hdphm/stack.py; `python -m hd_sim.cli` builds its own parser. R2: node shells import
+# downwards only, twin-state records and merging live in hd_twin, node helpers in hd_ros. R3: the
+# onboard evaluation takes the ground's calibration as an argument, calibrate=, as it takes the
+# plant's simulate=). The test fails on any new upward import.
+ALLOWED_UPWARD: set[tuple[str, str]] = set()
 
 # Existing import circles between modules of one package (strongly connected sets of modules).
 #   R4 = requirement 4 (hd_twin/modeldir.py: model format, save/load and config reader in one place).

@@ -257,9 +257,10 @@ def cmd_record(args) -> int:
 
 
 def _cmd_onboard_eval(args) -> int:
+    from hd_ground.references import calibrate_actuator
     from hd_onboard.evaluate import cmd_eval
 
-    return cmd_eval(args)
+    return cmd_eval(args, calibrate=calibrate_actuator)
 
 
 def _cmd_onboard_study(args) -> int:

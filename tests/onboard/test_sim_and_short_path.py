@@ -103,6 +103,7 @@ def test_short_path_with_ground_thresholds_detects_fault():
 
 def test_onboard_eval_false_alarm_rate_on_healthy_bags(tmp_path, healthy):
     from hd_bag import write_mission
+    from hd_ground.references import calibrate_actuator
     from hd_onboard.evaluate import cmd_eval, evaluate_bags
 
     d = tmp_path / "bags"
@@ -112,11 +113,11 @@ def test_onboard_eval_false_alarm_rate_on_healthy_bags(tmp_path, healthy):
     s = evaluate_bags([d])
     assert s["n_missions"] == 4 and s["missions_warn_or_worse"] == 0 and s["false_alarm_rate_per_mission"] == 0.0
     assert all(0 < r["margin"]["Q_red"] < 1 for r in s["missions"])
-    g = evaluate_bags([d], ground=1)  # 2 actuators x 2 missions: 1 calibrates, 1 is scored each
+    g = evaluate_bags([d], ground=1, calibrate=calibrate_actuator)  # 2 actuators x 2 missions: 1 calibrates, 1 is scored each
     assert g["n_missions"] == 2 and set(g["calibration"]) == {m.meta.actuator_id for m in healthy}
     assert all(r["threshold_source"]["Q_red"].startswith("ground") for r in g["missions"])
     with pytest.raises(ValueError, match="need more than"):
-        evaluate_bags([d], ground=2)
+        evaluate_bags([d], ground=2, calibrate=calibrate_actuator)
     with pytest.raises(ValueError, match="no such bag"):
         evaluate_bags([tmp_path / "nope"])
 
