@@ -66,7 +66,7 @@ def _train(fleet: Path, train_ids: list[str], out: Path, args) -> dict:
 
 def _fit_life(fleet: Path, train_ids: list[str], truth: dict, out_json: Path, args):
     """The operator's records of the training actuators (failure missions) -> events file -> life model."""
-    from hd_prognostic.hd import extract_actuator, unit_history
+    from hd_prognostic.pipeline import extract_actuator, unit_history
     from hd_prognostic.lifemodel import EXPOSURES, UnitEvents, attach_events, fit_best, read_events, write_events
 
     ev_path = out_json.parent / "events_train.csv"
@@ -89,7 +89,7 @@ def _fit_life(fleet: Path, train_ids: list[str], truth: dict, out_json: Path, ar
 
 
 def _replay(bags: list[Path], model_dir: Path, life_json: Path, out_dir: Path) -> dict:
-    from hdphm.ros_cli import run_stack_on_bags
+    from hdphm.stack import run_stack_on_bags
 
     _say(f"4/5 replaying {len(bags)} missions of the held-out actuator through the ROS 2 stack, "
          f"recording one MCAP per mission under {out_dir}")
@@ -112,7 +112,7 @@ def _score_node(summary: dict, aid: str, eol: int | None) -> dict:
 def _score(fleet: Path, aid: str, life_json: Path, out: Path, truth: dict, args) -> dict:
     """Batch prognosis with the same model as the node, scored against the simulator's truth (scoring only)."""
     from hd_prognostic import metrics as M
-    from hd_prognostic.hd import extract_actuator, unit_history
+    from hd_prognostic.pipeline import extract_actuator, unit_history
     from hd_prognostic.lifemodel import LifeModel, predict_history
     from hd_prognostic.plots import save_alpha_lambda
 
