@@ -19,7 +19,7 @@ import numpy as np
 from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
-from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout
+from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout, uses_state
 from .data import Dataset, DiscoveryError, dataset_from_missions
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
@@ -212,6 +212,13 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
                        retrain: bool, missions, log) -> Path | None:
     """Write the augmented model version (only when something was found)."""
     new_terms = [t for r in results for t in r.terms]
+    stateful = [t for t in new_terms if uses_state(t)]
+    if stateful:
+        # the twin evaluates static terms sample by sample; a term on a pre-sliding state (a path history)
+        # has no form there: reported in report.json, not written into the twin
+        log(f"not added to the twin (they need a pre-sliding state the twin does not carry): "
+            f"{[t['name'] for t in stateful]}")
+        new_terms = [t for t in new_terms if not uses_state(t)]
     if not new_terms:
         log("twin unchanged (no effect found)")
         return None
@@ -240,7 +247,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
             rp = r.refit_baseline_params
             if "T_C" in rp and rp["T_C"] >= 0:
                 params["T_C"] = rp["T_C"]
-            if "b" in rp and rp["b"] >= 0:
+            if "b" in rp and rp["b"] >= 0 and "n_v" not in r.baseline_params:  # b_visc: linear viscous only
                 params["b_visc"] = rp["b"]
             if r.baseline_params.get("eps_omega", 0) > 0:
                 # the identified friction transition width (hd_twin.physics' regularised sign)
