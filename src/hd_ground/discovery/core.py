@@ -89,6 +89,35 @@ def uses_state(term_or_basis) -> bool:
     return any(walk(b) for b in basis)
 
 
+def static_term(term: dict, eps_omega: float | None) -> dict | None:
+    """The term in the static form the twin evaluates sample by sample, or None if it has none.
+
+    The twin carries no path history: a pre-sliding state of theta_m (the friction direction) becomes
+    tanh(omega_m / eps_omega), the direction function with the identified width (the same friction at
+    steady sliding, without the travel-dependent transition); a state of the twist has no static form.
+    """
+    import copy
+
+    def conv(b):
+        if b.get("op") == "prod":
+            fs = [conv(f) for f in b["factors"]]
+            return None if any(f is None for f in fs) else {**b, "factors": fs}
+        v = str(b.get("var", ""))
+        if not v.startswith(STATE_PREFIX):
+            return copy.deepcopy(b)
+        if v.split(":")[1] == "theta_m" and b.get("op") == "var" and eps_omega and eps_omega > 0:
+            return {"op": "sgn", "var": "omega_m", "eps": float(eps_omega)}
+        return None
+    basis = [conv(b) for b in term.get("basis", [])]
+    if any(b is None for b in basis):
+        return None
+    out = copy.deepcopy(term)
+    out["basis"] = basis
+    if uses_state(term):
+        out["form"] = f"{term.get('form', '')} [twin: pre-sliding state replaced by tanh(omega_m / {eps_omega:.3g})]"
+    return out
+
+
 @dataclass
 class Options:
     min_gain: float = 0.02  # minimum relative drop of the CV error for adding a group

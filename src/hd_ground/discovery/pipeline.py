@@ -19,7 +19,7 @@ import numpy as np
 from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
-from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout, uses_state
+from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout, static_term
 from .data import Dataset, DiscoveryError, dataset_from_missions
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
@@ -211,14 +211,16 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
 def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
                        retrain: bool, missions, log) -> Path | None:
     """Write the augmented model version (only when something was found)."""
-    new_terms = [t for r in results for t in r.terms]
-    stateful = [t for t in new_terms if uses_state(t)]
-    if stateful:
-        # the twin evaluates static terms sample by sample; a term on a pre-sliding state (a path history)
-        # has no form there: reported in report.json, not written into the twin
-        log(f"not added to the twin (they need a pre-sliding state the twin does not carry): "
-            f"{[t['name'] for t in stateful]}")
-        new_terms = [t for t in new_terms if not uses_state(t)]
+    # the twin evaluates static terms sample by sample: a term on a pre-sliding state (a path history) goes
+    # in its static form (hd_ground.discovery.core.static_term); one without such a form stays in the report
+    new_terms, dropped = [], []
+    for r in results:
+        for t in r.terms:
+            st = static_term(t, r.baseline_params.get("eps_omega"))
+            (new_terms if st is not None else dropped).append(st if st is not None else t)
+    if dropped:
+        log(f"not added to the twin (they need a state of the twist the twin does not carry): "
+            f"{[t['name'] for t in dropped]}")
     if not new_terms:
         log("twin unchanged (no effect found)")
         return None
