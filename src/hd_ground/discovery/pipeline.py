@@ -69,12 +69,14 @@ def run_discovery(
     retrain: bool = False,
     log=print,
     missions=None,
+    results_out: list | None = None,
 ) -> dict:
     """Run discovery on ``bags`` and write OUT_DIR; returns the report dict.
 
     ``heldout``: bag names/paths (or substrings) held out whole; default: the
     last bag when there are several, else the last ``heldout_frac`` of time of
-    each bag. ``missions`` (already read, same order as ``bags``) skips reading.
+    each bag. ``missions`` (already read, same order as ``bags``) skips reading. ``results_out``: a list
+    that receives the per-signal :class:`SignalResult` objects (held-out residual arrays for evaluations).
     """
     opt = opt or Options()
     out = Path(out_dir)
@@ -129,6 +131,8 @@ def run_discovery(
         log(f"{target}: discovering (declared: {decl or 'none'}) ...")
         res = discover_signal(ds, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
         results.append(res)
+        if results_out is not None:
+            results_out.append(res)
         _log_result(res, log)
 
     within = {}
