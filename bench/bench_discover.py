@@ -181,8 +181,16 @@ def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -
             # mesh friction mu_c |F_my| sgn(omega_m) loads the WG through F_b: on tau_m it is mu_c r_b/r_m |T_tr| sgn
             add("c_L [-]", pr["c_L"], P["mu_c"] * P["r_b"] / P["r_m"], 0.25)
         elif name == "kinematic_error_harmonic":
+            # the plain amplitude term (A_2) is the main one, whichever of it and its load-dependent part
+            # (K_a_2) contributes more
+            e = next((x for x in rep["effects"] if (x["signal"], x["name"], x["variable"], x["order"]) == key
+                      and "A_2" in x["parameters"]), e)
+            pr = e["parameters"]
             sig = next(s for s in rep["signals"] if s["signal"] == "Q_red")
             K = sig["refit_baseline_parameters"]["K"]
+            bl = next((x for x in rep["effects"] if x["signal"] == "Q_red" and x["name"] == "backlash"), None)
+            if bl is not None:  # a dead-zone law: the stiffness outside the dead zone is K + K_j
+                K += bl["parameters"].get("K_j", 0.0)
             from hd_bag import read_mission
 
             Q = np.concatenate([read_mission(p).Q_red for p in fit_paths])
