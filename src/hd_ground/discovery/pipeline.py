@@ -223,9 +223,11 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
             st = static_term(t, r.baseline_params.get("eps_omega"))
             (new_terms if st is not None else dropped).append(st if st is not None else t)
     if dropped:
-        log(f"not added to the twin (they need a state of the twist the twin does not carry): "
-            f"{[t['name'] for t in dropped]}")
-    if not new_terms:
+        # the new version still declares them (and carries the recalibrated baseline): a found effect is never
+        # silently lost from the model's record
+        log(f"declared in the new twin version without a term (they need a state of the twist the twin does not "
+            f"carry): {[t['name'] for t in dropped]}")
+    if not new_terms and not dropped:
         log("twin unchanged (no effect found)")
         return None
     if dst.exists():
