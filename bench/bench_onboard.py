@@ -74,7 +74,9 @@ def core_bench(a) -> None:
     sys.path.insert(0, os.path.join(HERE, "..", "tests", "onboard"))
     from synth import make_mission
 
-    from hd_onboard.core import OnboardCore, run_mission, window_row
+    from hd_onboard.batch import run_mission
+    from hd_onboard.core import OnboardCore
+    from hd_onboard.windows import window_row
     from hd_onboard.expected import make_expected
     from hd_onboard.node import _feature_fn
     from hd_twin import physics as ph

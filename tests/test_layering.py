@@ -56,7 +56,7 @@ ALLOWED_UPWARD: set[tuple[str, str]] = {
     #     ChannelThreshold / StiffnessReference / FrictionReference (validation moves to hd_twin/state.py)
     ("hd_twin.node", "hd_onboard.node"), ("hd_twin.node", "hd_onboard.detector"),
     # R3: the onboard evaluation tooling calls the ground's per-actuator reference calibration (the
-    #     threshold circle is gone: hd_onboard.detector.robust_threshold serves both)
+    #     threshold circle is gone: hd_onboard.calibration.robust_threshold serves both)
     ("hd_onboard.evaluate", "hd_ground.references"),
     # R1: `python -m hd_sim.cli` runs the hdphm CLI (the plant's CLI entry goes with the CLI split)
     ("hd_sim.cli", "hdphm.cli"),

@@ -2,7 +2,7 @@
 
 ``scan_archive(dir)`` groups the bags of a directory tree by actuator (from
 each bag's ``hd_mission`` metadata), reads them (contract topics only) and
-runs :func:`hd_onboard.core.run_mission` on each: per mission it keeps the
+runs :func:`hd_onboard.batch.run_mission` on each: per mission it keeps the
 residual table, the window statistics and the flag summary. These are what
 the ground aggregates across missions (thresholds, recalibration, trends).
 """

@@ -10,15 +10,15 @@ actuator, on **all** their samples:
 * the residual lines (``hd_ground.thresholds.actuator_thresholds``, with the
   onboard configuration's EWMA time constant, persistence and minimum lines);
 * the healthy torsion law ``twist = a + b tanh(omega_m/eps) + g(Q)``
-  (:func:`hd_onboard.detector.fit_stiffness_reference`, the function the
+  (:func:`hd_onboard.detectors.stiffness.fit_stiffness_reference`, the function the
   onboard warm-up uses; one offset per mission: encoders need not share a
   zero across missions);
 * the healthy friction mismatch ``r_Q = a + b tanh(omega_m/eps)``
-  (:func:`hd_onboard.detector.fit_friction_reference`, one offset per
+  (:func:`hd_onboard.detectors.friction.fit_friction_reference`, one offset per
   mission), on the output-torque residual of the same twin (parameters and
   model) the onboard node will run, with ``scale = N T_C`` of those parameters.
 
-The missions are streamed through :func:`hd_onboard.core.run_mission` exactly
+The missions are streamed through :func:`hd_onboard.batch.run_mission` exactly
 as onboard (same conditioning: out-of-order stamps, NaN, dropouts), so the
 residuals are the ones the monitors will see. Only contract signals are used:
 ``/sim`` is never read.
@@ -50,7 +50,7 @@ def reference_samples(missions: Sequence, results: Sequence[dict], params) -> di
     (measured Q_red, else the twin's expected one), ``omega_m`` [rad/s], ``r_Q`` [N*m] (output-torque residual,
     NaN where not evaluated or Q_red not measured) and ``group`` (mission number) per sample.
 
-    ``results``: :func:`hd_onboard.core.run_mission` of each mission (their residual tables give Q_hat and r_Q).
+    ``results``: :func:`hd_onboard.batch.run_mission` of each mission (their residual tables give Q_hat and r_Q).
     Samples with a non-finite joint state are NaN (left out by the fits).
     """
     cols: dict[str, list] = {k: [] for k in ("twist_raw", "Q", "omega_m", "r_Q", "group")}
@@ -75,10 +75,11 @@ def actuator_references(missions: Sequence, results: Sequence[dict], params, con
     """``{"stiffness": StiffnessReference dict, "friction": FrictionReference dict}`` of one actuator
     (a key is absent when the archive does not define that law: no load variation, no measured
     Q_red, no motion in both directions). ``params``: the twin parameters the onboard core will use
-    (``eps_omega``, ``N T_C`` for the friction scale); ``config``: :class:`hd_onboard.core.OnboardConfig`.
+    (``eps_omega``, ``N T_C`` for the friction scale); ``config``: :class:`hd_onboard.config.OnboardConfig`.
     """
-    from hd_onboard.core import OnboardConfig
-    from hd_onboard.detector import fit_friction_reference, fit_stiffness_reference
+    from hd_onboard.config import OnboardConfig
+    from hd_onboard.detectors.friction import fit_friction_reference
+    from hd_onboard.detectors.stiffness import fit_stiffness_reference
 
     cfg = config or OnboardConfig()
     s = reference_samples(missions, results, params)
@@ -106,7 +107,9 @@ def calibrate_actuator(missions: Sequence, params=None, config=None, model_dir: 
     batch onboard results, for reports). Raises ValueError with no mission.
     """
     from hd_ground.thresholds import actuator_thresholds
-    from hd_onboard.core import OnboardConfig, OnboardCore, run_mission
+    from hd_onboard.batch import run_mission
+    from hd_onboard.config import OnboardConfig
+    from hd_onboard.core import OnboardCore
     from hd_onboard.expected import make_expected
     from hd_twin import physics as ph
 

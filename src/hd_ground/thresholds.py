@@ -6,8 +6,8 @@ known (or assumed) healthy:
 * ``mu`` = median, ``sigma`` = 1.4826 MAD (robust: a few transients do not
   inflate the scale), both in the channel's unit;
 * the EWMA ``e`` of the normalised residual is run exactly as onboard
-  (:func:`hd_onboard.detector.ewma`, same time constant; the arithmetic is
-  :func:`hd_onboard.detector.robust_threshold`, shared with the onboard self-calibration), and its
+  (:func:`hd_onboard.detectors.ewma.ewma`, same time constant; the arithmetic is
+  :func:`hd_onboard.calibration.robust_threshold`, shared with the onboard self-calibration), and its
   *persistent peak* is taken: the largest value that |e| held for the
   onboard persistence time (a sliding minimum over P samples, then the max);
 * ``h_warn = max(min_h_warn, warn_margin * peak)``,
@@ -26,7 +26,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from hd_onboard.detector import ChannelThreshold, persistent_peak, robust_threshold
+from hd_onboard.calibration import persistent_peak, robust_threshold
+from hd_onboard.detectors.ewma import ChannelThreshold
 
 __all__ = ["MIN_SAMPLES", "persistent_peak", "channel_threshold", "actuator_thresholds"]
 
@@ -41,7 +42,7 @@ def channel_threshold(segments: Iterable[np.ndarray], *, fs: float, ewma_tau_s: 
 
     ``fs`` [Hz] sample rate of the residuals; returns None when fewer than
     ``MIN_SAMPLES`` finite residuals are available (the caller keeps its
-    previous lines). The arithmetic is :func:`hd_onboard.detector.robust_threshold`
+    previous lines). The arithmetic is :func:`hd_onboard.calibration.robust_threshold`
     (the same function the onboard self-calibration runs), with no scale floor.
     """
     return robust_threshold(segments, fs=fs, ewma_tau_s=ewma_tau_s, persistence_s=persistence_s,
@@ -51,12 +52,12 @@ def channel_threshold(segments: Iterable[np.ndarray], *, fs: float, ewma_tau_s: 
 
 def actuator_thresholds(results: Sequence[dict], *, channels: Sequence[str] = ("Q_red", "twist"),
                         fs: float | None = None, **kw) -> dict[str, ChannelThreshold]:
-    """Per-channel thresholds of one actuator from batch onboard results (:func:`hd_onboard.core.run_mission`).
+    """Per-channel thresholds of one actuator from batch onboard results (:func:`hd_onboard.batch.run_mission`).
 
     Each result's residual table gives one segment per channel (columns
     ``r_Q_red`` and ``r_twist``); ``fs`` defaults to the median stamp rate.
     """
-    from hd_onboard.core import RESIDUAL_COLUMNS
+    from hd_onboard.residuals import RESIDUAL_COLUMNS
 
     col = {"Q_red": RESIDUAL_COLUMNS.index("r_Q_red"), "twist": RESIDUAL_COLUMNS.index("r_twist")}
     out: dict[str, ChannelThreshold] = {}

@@ -2,7 +2,7 @@
 
 ``hdphm onboard eval PATH... [--ground K] [--model-dir DIR] [--out DIR]``
 
-Every bag is streamed through :func:`hd_onboard.core.run_mission` exactly as
+Every bag is streamed through :func:`hd_onboard.batch.run_mission` exactly as
 the onboard node would process it (same core, same thresholds logic). Two
 threshold modes:
 
@@ -33,8 +33,11 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from hd_onboard.core import CHANNELS, OnboardConfig, OnboardCore, run_mission
-from hd_onboard.detector import ERROR, WARN
+from hd_onboard.batch import run_mission
+from hd_onboard.config import OnboardConfig
+from hd_onboard.core import OnboardCore
+from hd_onboard.residuals import CHANNELS
+from hd_onboard.detectors.levels import ERROR, WARN
 
 
 def collect_bags(paths: Iterable[str | os.PathLike]) -> list[str]:
@@ -52,12 +55,12 @@ def _margins(res: dict, core: OnboardCore) -> dict[str, float]:
         e = e[np.isfinite(e)]
         out[c] = float(e.max() / core.thresholds[c].h_warn) if len(e) else math.nan
     if tab.shape[1] > 8:  # stiffness: largest loss held for the persistence time / loss_warn
-        from hd_onboard.detector import persistent_peak
+        from hd_onboard.calibration import persistent_peak
 
         sm = core.stiffness
         out["stiffness"] = float(persistent_peak(tab[:, 8], sm.persistence) / sm.loss_warn) if np.isfinite(tab[:, 8]).any() else math.nan
     if tab.shape[1] > 9:  # friction: largest excess held for the persistence time / excess_warn
-        from hd_onboard.detector import persistent_peak
+        from hd_onboard.calibration import persistent_peak
 
         fm = core.friction
         out["friction"] = (float(persistent_peak(tab[:, 9], fm.persistence) / fm.excess_warn)
@@ -95,7 +98,7 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
     ``skip`` (self-calibration only): leave each actuator's first ``skip`` missions unscored.
     """
     from hd_ground.references import calibrate_actuator
-    from hd_onboard.detector import ChannelThreshold
+    from hd_onboard.detectors.ewma import ChannelThreshold
     from hd_onboard.expected import make_expected
     from hd_twin import physics as ph
 
@@ -277,7 +280,7 @@ def first_crossings(res: dict, core: OnboardCore) -> dict[str, float | None]:
     (excess above excess_warn), read back from the residual table of :func:`run_mission`; None when never.
     A NaN sample ends a run here (the EWMA channels' own counters hold across NaN), so this can only be later.
     """
-    from hd_onboard.detector import run_lengths
+    from hd_onboard.detectors.levels import run_lengths
 
     tab = res["table"]
     if not len(tab):
@@ -332,7 +335,7 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
     first flag [s] or None, delay [s] or None, reasons, first crossing per source)`` and a summary
     (detected, missed, early, median / max delay). ``simulate``: as in :func:`study_calibration`.
     """
-    from hd_onboard.detector import ChannelThreshold
+    from hd_onboard.detectors.ewma import ChannelThreshold
 
     cfg = (config or OnboardConfig()).validate()
     cache = missions if missions is not None else {}

@@ -9,9 +9,11 @@ import pytest
 pytest.importorskip("hd_sim")
 
 from hd_ground.references import calibrate_actuator  # noqa: E402
-from hd_onboard.core import OnboardCore, run_mission  # noqa: E402
-from hd_onboard.detector import (ChannelThreshold, FrictionReference, fit_friction_reference,  # noqa: E402
-                                 fit_stiffness_reference)
+from hd_onboard.batch import run_mission  # noqa: E402
+from hd_onboard.core import OnboardCore  # noqa: E402
+from hd_onboard.detectors.ewma import ChannelThreshold  # noqa: E402
+from hd_onboard.detectors.friction import FrictionReference, fit_friction_reference  # noqa: E402
+from hd_onboard.detectors.stiffness import fit_stiffness_reference  # noqa: E402
 from hd_twin.node import apply_update, initial_state  # noqa: E402
 from tests.onboard.simfix import faulted_mission, sim_mission  # noqa: E402
 

@@ -61,7 +61,7 @@ def measure_delays(n: int = 8, severity: float = 3.0, actuator: int = 1, duratio
                    effect: str = "lubrication_loss", splice: bool = False) -> list[tuple]:
     """Detection delay of the onboard core (physics stand-in twin) on ``n`` missions, onset 8 + 0.5 k s,
     seed 20 + k: [(seed, t_onset, first flag time [s] or None, delay [s] or None, channels)]."""
-    from hd_onboard.core import run_mission
+    from hd_onboard.batch import run_mission
 
     rows = []
     for k in range(n):

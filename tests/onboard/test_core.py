@@ -5,8 +5,12 @@ import pytest
 
 from tests.onboard.synth import make_mission  # noqa: E402
 
-from hd_onboard.core import OnboardConfig, OnboardCore, run_mission, RESIDUAL_COLUMNS  # noqa: E402
-from hd_onboard.detector import ERROR, OK, WARN, ChannelThreshold, LevelLatch, ewma, run_lengths  # noqa: E402
+from hd_onboard.batch import run_mission  # noqa: E402
+from hd_onboard.config import OnboardConfig  # noqa: E402
+from hd_onboard.core import OnboardCore  # noqa: E402
+from hd_onboard.residuals import RESIDUAL_COLUMNS  # noqa: E402
+from hd_onboard.detectors.ewma import ChannelThreshold, ewma  # noqa: E402
+from hd_onboard.detectors.levels import ERROR, OK, WARN, LevelLatch, run_lengths  # noqa: E402
 from hd_ground.thresholds import actuator_thresholds, channel_threshold, persistent_peak  # noqa: E402
 
 
@@ -56,7 +60,7 @@ def test_persistent_peak():
 
 def _old_threshold_arithmetic(segs, fs, tau, pers, wm, em, hw, he, floor=0.0):
     """The arithmetic both former copies (ground channel_threshold, onboard calibrate_channel) ran."""
-    from hd_onboard.detector import ewma
+    from hd_onboard.detectors.ewma import ewma
     fin = np.concatenate(segs)
     fin = fin[np.isfinite(fin)]
     mu = float(np.median(fin))
@@ -76,7 +80,7 @@ def _old_threshold_arithmetic(segs, fs, tau, pers, wm, em, hw, he, floor=0.0):
 def test_onboard_and_ground_thresholds_are_one_function():
     """Self-calibration (one warm-up segment) and ground thresholds give identical lines on the same
     data, equal to the arithmetic both ran before they were merged; the scale floor is onboard-only."""
-    from hd_onboard.detector import calibrate_channel
+    from hd_onboard.calibration import calibrate_channel
 
     rng = np.random.default_rng(7)
     r = 0.3 + 0.05 * rng.standard_t(4, 3000)

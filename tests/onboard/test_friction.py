@@ -5,8 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from hd_onboard.core import OnboardConfig
-from hd_onboard.detector import ERROR, OK, FrictionMonitor, fit_friction_reference
+from hd_onboard.config import OnboardConfig
+from hd_onboard.detectors.friction import FrictionMonitor, fit_friction_reference
+from hd_onboard.detectors.levels import ERROR, OK
 
 FS, EPS, SCALE = 1000.0, 0.05, 110.0
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from hd_bag import read_mission
-from hd_onboard.core import run_mission
-from hd_onboard.detector import ERROR, OK, WARN
+from hd_onboard.batch import run_mission
+from hd_onboard.detectors.levels import ERROR, OK, WARN
 from tests.robustness import foreign as FB
 
 

@@ -6,8 +6,10 @@ import pytest
 
 from tests.onboard.simfix import faulted_mission, sim_mission
 
-from hd_onboard.core import OnboardCore, run_mission, window_row  # noqa: E402
-from hd_onboard.detector import ERROR, OK, WARN  # noqa: E402
+from hd_onboard.batch import run_mission  # noqa: E402
+from hd_onboard.core import OnboardCore  # noqa: E402
+from hd_onboard.windows import window_row  # noqa: E402
+from hd_onboard.detectors.levels import ERROR, OK, WARN  # noqa: E402
 from hd_onboard.node import _feature_fn  # noqa: E402
 
 #: stated detection delay of a sudden grease loss (friction x4, lubrication_loss severity 3, hd_sim's

@@ -6,9 +6,12 @@ import pytest
 
 from tests.onboard.simfix import faulted_mission, sim_mission
 
-from hd_onboard.core import OnboardConfig, OnboardCore, RESIDUAL_COLUMNS, run_mission  # noqa: E402
-from hd_onboard.detector import (ERROR, OK, StiffnessMonitor, StiffnessReference, fit_stiffness_reference,  # noqa: E402
-                                 stiffness_basis)
+from hd_onboard.batch import run_mission  # noqa: E402
+from hd_onboard.config import OnboardConfig  # noqa: E402
+from hd_onboard.core import OnboardCore  # noqa: E402
+from hd_onboard.residuals import RESIDUAL_COLUMNS  # noqa: E402
+from hd_onboard.detectors.levels import ERROR, OK  # noqa: E402
+from hd_onboard.detectors.stiffness import StiffnessMonitor, StiffnessReference, fit_stiffness_reference, stiffness_basis  # noqa: E402
 
 
 def _law(Q):

@@ -27,7 +27,8 @@ def _mission(h_um=20.0, seed=1, duration=6.0, dropout=False, q_nan=False):
 
 def _node_rows(m):
     """The rows the prognostic node receives: the onboard core with the onboard node's feature function."""
-    from hd_onboard.core import OnboardCore, run_mission
+    from hd_onboard.batch import run_mission
+    from hd_onboard.core import OnboardCore
     from hd_onboard.node import _feature_fn
 
     core = OnboardCore(gear_ratio=m.meta.gear_ratio,
@@ -37,7 +38,7 @@ def _node_rows(m):
 
 @pytest.mark.parametrize("kind", ["clean", "dropout", "no_torque_sensor"])
 def test_batch_and_node_give_the_same_observation(kind):
-    from hd_onboard.core import OnboardConfig
+    from hd_onboard.config import OnboardConfig
     from hd_onboard.features import (OBS_WINDOW_S, onboard_window_features, mission_observation,
                                      mission_observation_features)
     from hd_prognostic.node import PARAMS, ActuatorTracker

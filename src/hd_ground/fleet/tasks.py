@@ -14,7 +14,7 @@ Per actuator the graph is::
 * :func:`mission_task` reads one bag where the worker runs and stores, atomically, its onboard features and
   mission observation (:func:`hd_onboard.features.mission_observation_features`), the twin residual
   statistics and monitor outputs of the onboard core run with the ground calibration
-  (:func:`hd_onboard.core.run_mission`), and the mission's recalibration inputs (the least-squares
+  (:func:`hd_onboard.batch.run_mission`), and the mission's recalibration inputs (the least-squares
   estimates of :func:`hd_ground.recalibration.recalibrate` on that mission alone: which parameters move);
 * :func:`actuator_task` updates the actuator's RUL history (:func:`hd_prognostic.hd.prognose` over the
   stored mission observations) and its fault-class probabilities (:mod:`hd_ground.fleet.classify`).
@@ -50,7 +50,7 @@ class FleetOptions:
     discover_units: int = 4  # actuators per type whose first reference mission discovery uses
 
     def onboard_config(self):
-        from hd_onboard.core import OnboardConfig
+        from hd_onboard.config import OnboardConfig
 
         try:
             return OnboardConfig(**self.onboard).validate()
@@ -132,7 +132,7 @@ def _params(calib: dict | None):
 
 def _onboard_core(calib: dict | None, mission, opts: FleetOptions):
     from hd_onboard.core import OnboardCore
-    from hd_onboard.detector import ChannelThreshold
+    from hd_onboard.detectors.ewma import ChannelThreshold
     from hd_onboard.expected import make_expected
 
     cfg = opts.onboard_config()
@@ -160,7 +160,8 @@ def analyse_mission(mission, calib: dict | None, opts: FleetOptions) -> dict[str
     """The four mission tables (row dicts) of one :class:`hd_bag.Mission` (pure: no store)."""
     from hd_ground.analytics import mission_summary
     from hd_ground.recalibration import FIT_NAMES, recalibrate
-    from hd_onboard.core import RESIDUAL_COLUMNS, run_mission
+    from hd_onboard.batch import run_mission
+    from hd_onboard.residuals import RESIDUAL_COLUMNS
     from hd_onboard.features import mission_observation_features
 
     m = mission

@@ -1,0 +1,137 @@
+"""The EWMA residual detector: normalisation, EWMA with persistence, per-channel lines.
+
+Pure numpy, streaming, vectorised over the samples of a block (state carried
+between blocks), so the onboard node, the batch evaluation, the ground's
+threshold calibration and the tests run the same arithmetic.
+
+Per residual channel c (``Q_red`` in N*m, ``twist`` in rad, ...)::
+
+    z_k = (r_k - mu_c) / sigma_c                      normalised residual [-]
+    e_k = (1 - lam) e_{k-1} + lam z_k                 EWMA, lam = dt / tau  [-]
+    over_warn_k  = |e_k| > h_warn_c   for >= P consecutive samples
+    over_error_k = |e_k| > h_error_c  for >= P consecutive samples
+
+The fault level at sample k (:class:`hd_onboard.detectors.levels.LevelLatch`) is ERROR if
+``over_error`` held within the last
+``hold_s`` seconds, else WARN if ``over_warn`` did, else OK: a flag is raised
+only after P = persistence_s / dt samples above the line (a single spike does
+not flag) and stays up at least ``hold_s`` (no chattering). Invalid samples
+(NaN residual: sensor NaN, dropout) do not move the EWMA: the filter runs on
+the valid samples only and holds its value across the invalid ones.
+
+``mu``, ``sigma``, ``h_warn`` and ``h_error`` are per actuator and per channel
+(:class:`ChannelThreshold`); the ground node computes them from healthy
+missions (``hd_ground.thresholds``, arithmetic :func:`hd_onboard.calibration.robust_threshold`)
+and pushes them through the twin core.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+
+from hd_onboard.detectors.levels import run_lengths
+
+
+@dataclass
+class ChannelThreshold:
+    """Normalisation and alarm lines of one residual channel of one actuator.
+
+    ``mu`` and ``sigma`` in the channel's unit (N*m for ``Q_red``, rad for
+    ``twist``); ``h_warn`` and ``h_error`` in units of sigma on the EWMA of the
+    normalised residual; ``source`` says where they came from.
+    """
+
+    mu: float
+    sigma: float
+    h_warn: float
+    h_error: float
+    source: str = "default"
+
+    def validate(self, where: str) -> "ChannelThreshold":
+        for k in ("mu", "sigma", "h_warn", "h_error"):
+            v = getattr(self, k)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+                raise ValueError(f"{where}: threshold {k} = {v!r} is not a finite number")
+        if self.sigma <= 0:
+            raise ValueError(f"{where}: sigma = {self.sigma} must be > 0")
+        if not 0 < self.h_warn <= self.h_error:
+            raise ValueError(f"{where}: need 0 < h_warn <= h_error, got h_warn={self.h_warn}, h_error={self.h_error}")
+        if self.h_error > 1e6:
+            raise ValueError(f"{where}: h_error = {self.h_error} is absurd (units of sigma)")
+        return self
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str) -> "ChannelThreshold":
+        if not isinstance(d, dict):
+            raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
+        try:
+            t = cls(mu=float(d["mu"]), sigma=float(d["sigma"]), h_warn=float(d["h_warn"]),
+                    h_error=float(d["h_error"]), source=str(d.get("source", "update")))
+        except KeyError as e:
+            raise ValueError(f"{where}: missing threshold key {e}") from None
+        except (TypeError, ValueError):
+            raise ValueError(f"{where}: threshold values must be numbers, got {d!r}") from None
+        return t.validate(where)
+
+
+def ewma(z: np.ndarray, lam: float, e0: float) -> np.ndarray:
+    """EWMA of ``z`` (NaN entries skipped: the output holds across them), starting from ``e0``."""
+    z = np.asarray(z, float)
+    out = np.empty_like(z)
+    valid = np.isfinite(z)
+    if not valid.any():
+        out.fill(e0)
+        return out
+    zv = z[valid]
+    ev, _ = lfilter([lam], [1.0, -(1.0 - lam)], zv, zi=[(1.0 - lam) * e0])
+    # forward fill: every sample takes the value of the last valid sample at or before it
+    pos = np.cumsum(valid) - 1  # index in ev of the last valid sample at or before each sample
+    out[:] = np.where(pos >= 0, ev[np.clip(pos, 0, None)], e0)
+    return out
+
+class ChannelDetector:
+    """Streaming EWMA + persistence detector of one residual channel."""
+
+    def __init__(self, name: str, threshold: ChannelThreshold, lam: float, persistence: int):
+        self.name = name
+        self.threshold = threshold
+        self.lam = float(lam)
+        self.persistence = max(int(persistence), 1)
+        self.reset()
+
+    def reset(self) -> None:
+        self.e = 0.0
+        self.run_warn = 0
+        self.run_error = 0
+
+    def step(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Block of residuals -> (z, e, cond_warn, cond_error) per sample."""
+        th = self.threshold
+        z = (np.asarray(r, float) - th.mu) / th.sigma
+        e = ewma(z, self.lam, self.e)
+        if len(e):
+            self.e = float(e[-1])
+        a = np.abs(e)
+        rw = run_lengths(a > th.h_warn, self.run_warn)
+        re = run_lengths(a > th.h_error, self.run_error)
+        if len(e):
+            self.run_warn, self.run_error = int(rw[-1]), int(re[-1])
+        return z, e, rw >= self.persistence, re >= self.persistence
+
+    def step_one(self, r: float) -> tuple[float, bool, bool]:
+        """One residual (scalar, NaN allowed) -> (e, cond_warn, cond_error); same arithmetic as :meth:`step`."""
+        th = self.threshold
+        z = (r - th.mu) / th.sigma
+        if z == z and z not in (math.inf, -math.inf):
+            self.e = self.lam * z + (1.0 - self.lam) * self.e
+        a = abs(self.e)
+        self.run_warn = self.run_warn + 1 if a > th.h_warn else 0
+        self.run_error = self.run_error + 1 if a > th.h_error else 0
+        return self.e, self.run_warn >= self.persistence, self.run_error >= self.persistence

@@ -1,0 +1,193 @@
+"""Residual channels of one actuator: the expected response (the twin running now) and measured - expected.
+
+Channels (:data:`CHANNELS`):
+
+* ``Q_red`` [N*m]: measured reducer output torque minus the twin's expected
+  one (NaN where the bag does not measure Q_red);
+* ``twist`` [rad]: transmission deflection not explained by the elastic
+  law, ``(theta_f - theta_m/N) - Q/K_out`` (Q = measured Q_red, else the
+  expected one); the warm-up (:mod:`hd_onboard.warmup`) gives the zero it is
+  measured from (encoder zero offsets).
+
+:class:`Residuals` owns the expected-response model: the one configured for
+the core (each mission starts on it again) and the one running now (the
+physics-only stand-in after a fallback: a twin refusing the joint-state rate,
+or encoders without a common zero fed to a trained twin). It resets the model
+at a dropout (new segment) and masks the first ``settle_s`` seconds after a
+reset (filter / LSTM transient). Block (:meth:`Residuals.block`) and one-sample
+(:meth:`Residuals.one`) paths give the same numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from hd_onboard.detectors.levels import ERROR, WARN
+from hd_onboard.expected import I_REF, I_TEMP, PhysicsStandInExpected
+from hd_twin import physics as ph
+
+#: joint-state sample columns (SI) the core takes
+JS_COLS = ("theta_m", "theta_f", "omega_m", "omega_f", "tau_m", "Q_red")
+#: residual channels tested by the EWMA detectors
+CHANNELS = ("Q_red", "twist")
+#: columns of the residual table published on /hd/onboard/residuals
+#: (``stiff_loss``: torsional-stiffness loss estimate 1 - 1/s of :class:`hd_onboard.detectors.stiffness.StiffnessMonitor`, NaN
+#: where not evaluable; ``fric_excess``: friction excess of :class:`hd_onboard.detectors.friction.FrictionMonitor`, extra
+#: output-referred friction torque in units of the twin's N*T_C, NaN where not evaluable or Q_red is not measured)
+RESIDUAL_COLUMNS = ("stamp", "Q_red", "Q_red_hat", "r_Q_red", "e_Q_red", "r_twist", "e_twist", "level", "stiff_loss",
+                    "fric_excess")
+
+#: records an input problem: ``note(key, level, message)`` (:meth:`hd_onboard.guard.InputGuard.note`)
+Note = Callable[[str, int, str], None]
+
+
+class BlockResiduals(NamedTuple):
+    """Residuals of a block of accepted samples (NaN where not evaluated, see ``evaluate``)."""
+
+    Q_meas: np.ndarray  # N*m, measured Q_red (NaN: not measured)
+    Q_hat: np.ndarray  # N*m, expected Q_red
+    r_Q: np.ndarray  # N*m, Q_meas - Q_hat
+    Q_for_twist: np.ndarray  # N*m, measured Q_red, else the expected one
+    twist_raw: np.ndarray  # rad, theta_f - theta_m / N
+    twist: np.ndarray  # rad, twist_raw - Q_for_twist / K_out (before the warm-up's zero)
+    evaluate: np.ndarray  # bool, valid sample outside a settle interval
+    n_resets: int  # model resets (dropouts) in the block
+
+
+class Residuals:
+    """Expected response and residual channels of one actuator (see module docstring)."""
+
+    def __init__(self, expected, params: ph.TwinParams, cfg):
+        self.cfg = cfg
+        self.params = params
+        #: the expected-response model configured for the core (each mission starts on it again);
+        #: :attr:`expected` is the one running now (the physics stand-in after a fallback)
+        self.expected_configured = expected or PhysicsStandInExpected(params, fs_hz=cfg.nominal_fs or 1000.0,
+                                                                      accel_cutoff_hz=cfg.accel_cutoff_hz)
+        self.expected = self.expected_configured
+
+    def new_mission(self) -> None:
+        """The configured model again, reset; temperature and command unknown; no settle interval."""
+        self.temperature = math.nan  # degC, last plausible temperature sample
+        self.theta_ref = math.nan  # rad, last command
+        self.expected = self.expected_configured
+        self.expected.reset()
+        self.settle_until = -math.inf  # s since mission start: not evaluated before
+        self._x1 = np.full(7, np.nan)
+
+    def set_params(self, params: ph.TwinParams) -> None:
+        """New twin parameters (the gear ratio is kept), given to both models."""
+        self.params = params.with_meta(gear_ratio=self.params.N)
+        for e in {id(self.expected): self.expected, id(self.expected_configured): self.expected_configured}.values():
+            if hasattr(e, "set_params"):
+                e.set_params(self.params)
+
+    @property
+    def fallback_reason(self) -> str:
+        """Why the configured twin is not the one running ("" when it is)."""
+        return getattr(self.expected, "fallback_reason", "") or ""
+
+    # ---- fallbacks -------------------------------------------------------------------------------
+    def use_standin(self, fs: float | None, key: str, level: int, reason: str, note: Note) -> None:
+        """Safe mode: replace a trained twin by the physics-only stand-in for the rest of the mission."""
+        cfg = self.cfg
+        exp = PhysicsStandInExpected(self.params, fs_hz=fs or cfg.nominal_fs or 1000.0,
+                                     accel_cutoff_hz=cfg.accel_cutoff_hz)
+        exp.fallback_reason = reason
+        self.expected = exp
+        note(key, level, reason)
+
+    def rate_known(self, fs: float, t_s: float | None, note: Note) -> None:
+        """The joint-state rate ``fs`` [Hz] is known (at ``t_s`` s of the mission): the expected-response model is
+        set up for it (``configure(fs_hz=...)``, a no-op when its rate is already that) or refused (ERROR
+        ``twin_rate``, physics-only stand-in)."""
+        fs = float(fs)
+        conf = getattr(self.expected, "configure", None)
+        if conf is None or getattr(self.expected, "fs_in", None) == fs:
+            return
+        try:
+            conf(fs_hz=fs)
+        except ValueError as e:
+            fm = getattr(self.expected, "fs_model", math.nan)
+            self.use_standin(fs, "twin_rate", ERROR,
+                             f"twin refused: trained at {fm:.1f} Hz, joint states at {fs:.1f} Hz ({e}); "
+                             "physics-only stand-in used", note)
+        if t_s is not None:  # a reconfigured model restarts: not evaluated for settle_s
+            self.settle_until = max(self.settle_until, t_s + self.cfg.settle_s)
+
+    def twist_reference_problem(self, fs: float | None, msg: str, note: Note) -> None:
+        """Encoders without a common zero (:meth:`hd_onboard.guard.InputGuard.check_twist_reference`): a trained
+        twin is not fed this twist (stand-in); the problem is recorded either way (WARN ``twist_reference``)."""
+        if getattr(self.expected, "kind", "") == "onnx_twin":
+            self.use_standin(fs, "twist_reference", WARN,
+                             msg + "; trained twin not fed this twist: physics-only stand-in used", note)
+        else:
+            note("twist_reference", WARN, msg)
+
+    # ---- the two paths ---------------------------------------------------------------------------
+    def block(self, t: np.ndarray, V: np.ndarray, Vh: np.ndarray, valid: np.ndarray,
+              reset_at: np.ndarray) -> BlockResiduals:
+        """Residuals of a block: ``t`` [s since mission start], ``V`` samples (columns :data:`JS_COLS`), ``Vh``
+        the same with NaN held (twin input), ``valid`` rows, ``reset_at`` rows starting a new segment."""
+        cfg = self.cfg
+        n = len(t)
+        # twin inputs: held NaN, temperature and command held
+        X = np.empty((n, 7))
+        X[:, 0] = Vh[:, 0]  # theta_m
+        X[:, 1] = Vh[:, 2]  # omega_m
+        X[:, 2] = Vh[:, 4]  # tau_m
+        X[:, 3] = Vh[:, 1]  # theta_f
+        X[:, 4] = Vh[:, 3]  # omega_f
+        X[:, I_TEMP] = self.temperature
+        X[:, I_REF] = self.theta_ref
+        # expected response, per segment (reset at dropouts)
+        Q_hat = np.empty(n)
+        settle_before = self.settle_until
+        cuts = np.flatnonzero(reset_at)
+        bounds = [0] + [int(c) for c in cuts if c > 0] + [n]
+        n_resets = 0
+        if len(cuts) and cuts[0] == 0:
+            self._reset_segment(t[0])
+            n_resets += 1
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            if a > 0:
+                self._reset_segment(t[a])
+                n_resets += 1
+            Q_hat[a:b] = self.expected.step(t[a:b], X[a:b])
+        # residuals
+        Q_meas = V[:, 5]
+        r_Q = Q_meas - Q_hat
+        Q_for_twist = np.where(np.isfinite(Q_meas), Q_meas, Q_hat)
+        twist_raw = V[:, 1] - V[:, 0] / self.params.N
+        twist = twist_raw - Q_for_twist / self.params.K_out
+        # not evaluated: settle_s after each reset (per sample: a reset late in the block masks only what follows it)
+        settle = np.maximum(settle_before, np.maximum.accumulate(np.where(reset_at, t + cfg.settle_s, -np.inf)))
+        evaluate = valid & (t >= settle)
+        r_Q = np.where(evaluate, r_Q, np.nan)
+        twist = np.where(evaluate, twist, np.nan)
+        twist_raw = np.where(evaluate, twist_raw, np.nan)
+        return BlockResiduals(Q_meas, Q_hat, r_Q, Q_for_twist, twist_raw, twist, evaluate, n_resets)
+
+    def one(self, t: float, tm: float, tf: float, wm: float, wf: float, tau: float, Q: float):
+        """One valid sample inside a segment -> ``(Q_hat, r_Q, Q_for_twist, twist_raw, twist)``; same arithmetic
+        as :meth:`block` (the model must have ``step_one``)."""
+        x = self._x1
+        x[0], x[1], x[2], x[3], x[4] = tm, wm, tau, tf, wf
+        x[I_TEMP] = self.temperature
+        x[I_REF] = self.theta_ref
+        Q_hat = float(self.expected.step_one(t, x))
+        p = self.params
+        r_Q = Q - Q_hat  # NaN when Q_red is not measured
+        Qt = Q if Q == Q else Q_hat
+        tw_raw = tf - tm / p.N
+        twist = tw_raw - Qt / p.K_out
+        if t < self.settle_until:
+            r_Q = twist = tw_raw = math.nan
+        return Q_hat, r_Q, Qt, tw_raw, twist
+
+    def _reset_segment(self, t_s: float) -> None:
+        self.expected.reset()
+        self.settle_until = t_s + self.cfg.settle_s
