@@ -132,7 +132,6 @@ class Options:
     min_samples: int = 1000
     standstill_sigmas: float = 3.0  # tau_m: rows with |omega_m| below this many speed-noise sigmas are left out
     min_fit_blocks: int = 3
-    identify_viscous_exponent: bool = False  # search n_v of b |omega_m|^n_v sgn(omega_m) in the baseline
 
 
 @dataclass
@@ -177,12 +176,11 @@ def _sgn(eps):
 
 
 def baseline_columns(target: str, avail: set[str], declared: list[str], extra_terms: list[dict], sgn_eps,
-                     twin_params: dict, visc_exp: float = 1.0) -> tuple[list[BaselineColumn], list[str]]:
+                     twin_params: dict) -> tuple[list[BaselineColumn], list[str]]:
     """The twin's model of ``target`` as linear-in-parameter columns; plus notes.
 
     ``sgn_eps``: the width of the friction's tanh(omega_m / eps), or a basis spec of the direction function
-    (the pre-sliding state when the data prefer a rate-independent transition). ``visc_exp``: exponent n_v of
-    the speed-proportional friction b |omega_m|^n_v sgn(omega_m) (1: linear viscous friction)."""
+    (the pre-sliding state when the data prefer a rate-independent transition)."""
     notes: list[str] = []
     cols: list[BaselineColumn] = []
     if target == "tau_m":
@@ -193,15 +191,15 @@ def baseline_columns(target: str, avail: set[str], declared: list[str], extra_te
             notes.append("Q_red not measured: the load path Q_red/(N eta) is absent from the tau_m model")
         known = {
             "coulomb_friction": ("T_C", _sgn(sgn_eps)),
-            "viscous_friction": ("b", {"op": "var", "var": "omega_m"} if visc_exp == 1.0 else
-                                 {"op": "pow", "var": "omega_m", "p": float(visc_exp), "odd": True}),
+            "viscous_friction": ("b", {"op": "var", "var": "omega_m"}),
             "load_dependent_friction": ("c_L", {"op": "prod", "factors": [{"op": "abs", "var": "Q_red"}, _sgn(sgn_eps)]}),
         }
         if "stribeck_friction" in declared and "omega_s" in twin_params:
-            known["stribeck_friction"] = ("T_S_minus_T_C", {"op": "stribeck", "var": "omega_m",
-                                                            "v_s": float(twin_params["omega_s"]),
-                                                            "delta": float(twin_params.get("delta", 1.0)),
-                                                            "eps": sgn_eps if not isinstance(sgn_eps, dict) else 0.0})
+            v_s, delta = float(twin_params["omega_s"]), float(twin_params.get("delta", 1.0))
+            known["stribeck_friction"] = ("T_S_minus_T_C", {"op": "stribeck", "var": "omega_m", "v_s": v_s,
+                                                            "delta": delta, "eps": sgn_eps} if not isinstance(sgn_eps, dict)
+                                          else {"op": "prod", "factors": [{"op": "exp_decay", "var": "omega_m",
+                                                                           "v_s": v_s, "delta": delta}, dict(sgn_eps)]})
     elif target == "Q_red":
         # Q_red = K (theta_m/N - theta_f) + c (omega_m/N - omega_f): positive stiffness and damping
         cols.append(BaselineColumn("K", None, {"op": "var", "var": "windup"}))
@@ -712,18 +710,12 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         hi_eps = max(0.5 * scale, 10 * lo_eps)
         s_rows = _take(sig, srows)
 
-        # the speed-dependent part of the steady-state curve, b |omega_m|^n_v sgn(omega_m) (Bo & Pavelescu
-        # 1982; n_v = 1 is linear viscous friction), with n_v identified jointly with the transition
-        visc = "viscous_friction" in declared and "omega_m" in avail
-        # (searched, it was not identified on any world here: it drifts to a bound; off, linear viscous kept)
-        nv_shape = [Shape("n_v", 0.25, 4.0, log=True, n_grid=5)] if visc and opt.identify_viscous_exponent else []
-
         def design_eps(sh):
-            return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, sh["eps"], twin_params,
-                                                     sh.get("n_v", 1.0))[0], s_rows)
+            return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, sh["eps"], twin_params)[0],
+                                    s_rows)
         bc = baseline_columns(target, avail, declared, extra_terms, 1.0, twin_params)[0]
         eps_fit = fit_separable(y[srows], design_eps, [c.param for c in bc], ds.block[srows],
-                                [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)] + nv_shape)
+                                [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)])
         sgn_eps = eps_fit.shape["eps"]
         statements.append(
             f"friction transition through zero speed: tanh(omega_m / eps), eps = {sgn_eps:.3g} +- "
@@ -746,10 +738,10 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
 
             def design_ps(sh):
                 spec = {"op": "var", "var": state_var("theta_m", sh["d"])}
-                return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, spec, twin_params,
-                                                         sh.get("n_v", 1.0))[0], s_rows)
+                return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, spec, twin_params)[0],
+                                        s_rows)
             ps_fit = fit_separable(y[srows], design_ps, [c.param for c in bc], ds.block[srows],
-                                   [Shape("d", d_lo, d_hi, log=True, n_grid=12)] + nv_shape)
+                                   [Shape("d", d_lo, d_hi, log=True, n_grid=12)])
             gain = 1.0 - (ps_fit.cv_rmse / eps_fit.cv_rmse) ** 2 if eps_fit.cv_rmse > 0 else 0.0
             d_ps = ps_fit.shape["d"]
             if ps_fit.identified["d"] and gain >= opt.min_gain:
@@ -765,20 +757,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                     f"friction transition: a pre-sliding state of theta_m (d = {d_ps:.3g} rad) does not improve on "
                     f"tanh(omega_m / eps) (CV gain {gain:+.1%}"
                     + ("" if ps_fit.identified["d"] else "; d not identified: " + "; ".join(ps_fit.notes)) + ")")
-    visc_exp = 1.0
-    law_fit = ps_fit if isinstance(fric, dict) else eps_fit
-    if law_fit is not None and "n_v" in law_fit.shape:
-        nv, nv_sd = law_fit.shape["n_v"], law_fit.shape_sd["n_v"]
-        # n_v leaves 1 only when the data identify it and it differs from 1 by more than 2 jackknife SDs
-        if law_fit.identified["n_v"] and abs(nv - 1.0) > 2 * nv_sd:
-            visc_exp = float(nv)
-            statements.append(f"speed-dependent friction b |omega_m|^n_v sgn(omega_m): n_v = {nv:.3g} +- {nv_sd:.2g} "
-                              "(identified with the transition; 1 would be linear viscous friction)")
-        else:
-            why = ("; ".join(n for n in law_fit.notes if n.startswith("n_v")) or
-                   f"n_v = {nv:.3g} +- {nv_sd:.2g} is consistent with 1")
-            statements.append(f"speed-dependent friction: linear viscous b omega_m kept ({why})")
-    cols, notes = baseline_columns(target, avail, declared, extra_terms, fric, twin_params, visc_exp)
+    cols, notes = baseline_columns(target, avail, declared, extra_terms, fric, twin_params)
     statements += notes
     Xb_all = _baseline_matrix(cols, sig)
     keep, st = _prune_collinear(Xb_all[fit], [c.param for c in cols])
@@ -791,8 +770,6 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     if eps_fit is not None:
         base_params["eps_omega"] = float(sgn_eps)
         base_params["eps_omega_sd"] = float(eps_fit.shape_sd["eps"])
-    if visc_exp != 1.0:
-        base_params["n_v"] = visc_exp
     if isinstance(fric, dict):
         base_params["presliding_distance"] = float(ps_fit.shape["d"])
         base_params["presliding_distance_sd"] = float(ps_fit.shape_sd["d"])

@@ -255,7 +255,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
             rp = r.refit_baseline_params
             if "T_C" in rp and rp["T_C"] >= 0:
                 params["T_C"] = rp["T_C"]
-            if "b" in rp and rp["b"] >= 0 and "n_v" not in r.baseline_params:  # b_visc: linear viscous only
+            if "b" in rp and rp["b"] >= 0:
                 params["b_visc"] = rp["b"]
             if r.baseline_params.get("eps_omega", 0) > 0:
                 # the identified friction transition width (hd_twin.physics' regularised sign)
