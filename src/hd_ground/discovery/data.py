@@ -63,8 +63,96 @@ def _derivative(x: np.ndarray, t: np.ndarray, seg: np.ndarray, window_s: float) 
     return out
 
 
-def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02) -> tuple[dict[str, np.ndarray], list[str]]:
-    """Signal table of one mission (full length, may contain NaN) and notes on what was done."""
+def _lag_sums(omega: np.ndarray, theta: np.ndarray, t: np.ndarray, seg: np.ndarray,
+              window_s: float) -> tuple[float, float, float, int]:
+    """Normal-equation sums of omega - theta' = -tau theta'' over the finite segments of one mission:
+    (sum a r, sum a a, sum r r, n) with r = omega - theta' (central differences), a = theta'' (the smoothed
+    derivative of theta')."""
+    sar = saa = srr = 0.0
+    n = 0
+    for sg in np.unique(seg):
+        idx = np.flatnonzero(seg == sg)
+        if len(idx) < 7:
+            continue
+        ts, th, w = t[idx], theta[idx], omega[idx]
+        if not (np.all(np.isfinite(th)) and np.all(np.isfinite(w))):
+            continue
+        rate = np.gradient(th, ts)
+        acc = _derivative(rate, ts, np.zeros(len(idx), int), window_s)
+        ok = np.isfinite(acc)
+        r, a = w[ok] - rate[ok], acc[ok]
+        sar += float(a @ r)
+        saa += float(a @ a)
+        srr += float(r @ r)
+        n += int(ok.sum())
+    return sar, saa, srr, n
+
+
+def speed_lag(missions: list[Mission], speed: str, angle: str, *,
+              window_s: float = 0.02) -> tuple[float, float]:
+    """Delay of a logged speed behind the derivative of its logged angle, s, and its standard error.
+
+    A drive's speed estimate is the encoder angle differenced and low-pass filtered (and a logger may
+    average it over the log period), so it lags or leads the angle's own rate; a first-order filter with
+    time constant tau delays it by tau at low frequency: omega(t) ~ theta'(t - tau) ~ theta'(t) - tau theta''(t).
+    tau by least squares of omega - theta' on -theta'' pooled over the missions (one actuator type, one
+    drive: one sensor), per segment (never across a gap); the SE from the residual (white-noise
+    assumption: optimistic for quantisation noise, hence the 3-SE rule of :func:`speed_timing`). NaN where
+    the angle never accelerates.
+    """
+    sar = saa = srr = 0.0
+    n = 0
+    for m in missions:
+        seg = np.asarray(m.segment if m.segment is not None else np.zeros(m.n, int))
+        x = _lag_sums(np.asarray(getattr(m, speed), float), np.asarray(getattr(m, angle), float),
+                      np.asarray(m.t, float), seg, window_s)
+        sar, saa, srr, n = sar + x[0], saa + x[1], srr + x[2], n + x[3]
+    if saa <= 0 or n < 3:
+        return float("nan"), float("nan")
+    tau = -sar / saa
+    rss = max(srr - sar * sar / saa, 0.0)
+    return float(tau), float(np.sqrt(rss / (n - 1) / saa))
+
+
+def retime_speed(omega: np.ndarray, t: np.ndarray, seg: np.ndarray, tau: float, window_s: float) -> np.ndarray:
+    """The logged speed on its angle's time base: omega + tau omega' (the first-order inverse, exact for a
+    first-order low-pass at low frequency; omega' the smoothed derivative); samples without a derivative
+    are kept as logged."""
+    d = _derivative(omega, t, seg, window_s)
+    return np.where(np.isfinite(d), omega + tau * d, omega)
+
+
+def speed_timing(missions: list[Mission], window_s: float = 0.02) -> tuple[dict[str, float], list[str]]:
+    """Identified sensor model of the logged speeds: ``{speed: tau}`` to re-time, and notes.
+
+    Why: the friction acts on the shaft's speed at the instant its torque is logged, and the encoder angle
+    is a point sample without dynamics, so a speed estimate that lags (a drive's filtered estimate) bends
+    every speed-dependent term in transients (a Stribeck curve fitted on lagged speeds is wrong at
+    constant speed). Re-timed only when the delay is identified (|tau| > 3 SE) and small enough for the
+    first-order inverse (|tau| < half the derivative window); otherwise kept as logged, with the reason.
+    """
+    lags: dict[str, float] = {}
+    notes: list[str] = []
+    for speed, angle in (("omega_m", "theta_m"), ("omega_f", "theta_f")):
+        tau, se = speed_lag(missions, speed, angle, window_s=window_s)
+        if not np.isfinite(tau) or abs(tau) <= 3.0 * se:
+            continue
+        if abs(tau) >= 0.5 * window_s:
+            notes.append(f"{speed}: the logged speed lags the derivative of {angle} by {tau * 1e3:.3g} +- {se * 1e3:.2g} "
+                         f"ms, beyond the first-order re-timing (< {0.5e3 * window_s:g} ms); used as logged")
+            continue
+        lags[speed] = tau
+        notes.append(f"{speed}: the logged speed lags the derivative of {angle} by {tau * 1e3:.3g} +- {se * 1e3:.2g} ms "
+                     "(least squares over all bags: a drive's filtered speed estimate or a logger's averaging); "
+                     f"re-timed to the angle's instants, {speed} + tau d{speed}/dt, before any model sees it")
+    return lags, notes
+
+
+def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
+                       speed_lags: dict[str, float] | None = None) -> tuple[dict[str, np.ndarray], list[str]]:
+    """Signal table of one mission (full length, may contain NaN) and notes on what was done.
+
+    ``speed_lags``: ``{speed: tau}`` from :func:`speed_timing`; those logged speeds are re-timed."""
     notes: list[str] = []
     name = m.report.path or m.meta.actuator_id
     n = m.n
@@ -85,6 +173,9 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02) -> tuple[dic
     if np.mean(np.isfinite(s["omega_m"])) < 0.5 and np.mean(np.isfinite(s["theta_m"])) > 0.9:
         s["omega_m"] = _derivative(s["theta_m"], m.t, seg, deriv_window_s)
         notes.append(f"{name}: omega_m mostly missing; derived from theta_m")
+    else:
+        for w, tau in (speed_lags or {}).items():
+            s[w] = retime_speed(s[w], m.t, seg, tau, deriv_window_s)
     s["i_q"] = s["tau_m"] / kt
     s["alpha_m"] = _derivative(s["omega_m"], m.t, seg, deriv_window_s)
     if np.any(np.isfinite(s["Q_red"])):
@@ -117,8 +208,12 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02) -> tuple[dic
 
 
 def dataset_from_missions(missions: list[Mission], names: list[str] | None = None, *, blocks_per_bag: int = 5,
-                          required: tuple[str, ...] = ("theta_m", "omega_m", "tau_m")) -> Dataset:
+                          required: tuple[str, ...] = ("theta_m", "omega_m", "tau_m"),
+                          retime_speeds: bool = True) -> Dataset:
     """Concatenate missions into one :class:`Dataset`.
+
+    Logged speeds are first put on their angles' time base by the identified sensor model of
+    :func:`speed_timing` (``retime_speeds=False``: as logged).
 
     A signal that is entirely missing in any bag is dropped from all bags (the
     same model must apply everywhere); ``required`` signals must be present.
@@ -126,10 +221,11 @@ def dataset_from_missions(missions: list[Mission], names: list[str] | None = Non
     if not missions:
         raise DiscoveryError("no missions given")
     names = names or [m.report.path or f"bag{i}" for i, m in enumerate(missions)]
-    tables, notes = [], []
+    lags, notes = speed_timing(missions) if retime_speeds else ({}, [])
+    tables = []
     gear, kt = None, None
     for m, nm in zip(missions, names):
-        s, nn = signals_of_mission(m)
+        s, nn = signals_of_mission(m, speed_lags=lags)
         tables.append(s)
         notes += nn
         if gear is None:
