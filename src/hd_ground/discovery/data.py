@@ -5,7 +5,9 @@ Rows with a non-finite value in any signal that is in use are dropped and the
 count is reported. Each bag is cut into contiguous time blocks: fit/held-out
 splits and cross-validation folds are made of whole blocks or bags, never of
 interleaved samples (neighbouring samples are correlated; a sample split would
-overstate how well a term generalises).
+overstate how well a term generalises). Logged speeds are put on their angles'
+time base first (:func:`speed_timing`: an identified delay of the drive's speed
+estimate, not an assumed filter).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class Dataset:
     gear_ratio: float
     torque_constant: float
     notes: list[str] = field(default_factory=list)
+    speed_lags: dict[str, float] = field(default_factory=dict)  # speed -> identified delay (s) it was re-timed by
 
     @property
     def n(self) -> int:
@@ -41,7 +44,7 @@ class Dataset:
     def subset(self, mask: np.ndarray) -> "Dataset":
         return Dataset({k: v[mask] for k, v in self.signals.items()}, self.bag[mask], self.block[mask],
                        self.tfrac[mask], self.t[mask], self.segment[mask], self.bag_names, self.gear_ratio,
-                       self.torque_constant, list(self.notes))
+                       self.torque_constant, list(self.notes), dict(self.speed_lags))
 
 
 def _derivative(x: np.ndarray, t: np.ndarray, seg: np.ndarray, window_s: float) -> np.ndarray:
@@ -269,4 +272,4 @@ def dataset_from_missions(missions: list[Mission], names: list[str] | None = Non
         nblk += blocks_per_bag
     return Dataset({k: np.concatenate(v) for k, v in cols.items()}, np.concatenate(bag), np.concatenate(block),
                    np.concatenate(tfrac), np.concatenate(tt), np.concatenate(segm), list(names), float(gear),
-                   float(kt), notes)
+                   float(kt), notes, dict(lags))

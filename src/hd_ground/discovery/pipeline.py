@@ -200,7 +200,8 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
     primary = next((p for p in per if p["identifiable"] and p["effects"]), None) or \
         next((p for p in per if p["identifiable"]), None) or (per[0] if per else None)
     rep = {"format": REPORT_FORMAT, "bags": ds.bag_names, "split": split, "twin_in": twin_dir,
-           "options": asdict(opt), "signals": per, "data_notes": list(ds.notes)}
+           "options": asdict(opt), "signals": per, "data_notes": list(ds.notes),
+           "speed_lags": dict(ds.speed_lags)}
     if primary:
         for k in ("signal", "error_before", "error_after", "effects", "declared_before", "declared_after",
                   "identifiable", "statements"):
