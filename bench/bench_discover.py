@@ -303,12 +303,15 @@ def _match(k, want) -> bool:
 def _greedy(bags: list[str], signal: str) -> dict:
     """The plain greedy least-squares reference on the same bags, the last one held out."""
     from hd_bag import read_mission
-    from hd_ground.discovery.core import Options, standstill_rows
+    from hd_ground.discovery.core import Options, choose_speed_timing, standstill_rows
     from hd_ground.discovery.data import dataset_from_missions
     from hd_ground.discovery.greedy import greedy_discover
 
-    ds = dataset_from_missions([read_mission(b) for b in bags], [str(b) for b in bags])
+    ms = [read_mission(b) for b in bags]
+    ds = dataset_from_missions(ms, [str(b) for b in bags])
     ho = ds.bag == len(bags) - 1
+    if ds.speed_lags:  # the same signals discover reads (its speed-timing choice, made on the fit bags)
+        ds = choose_speed_timing(dataset_from_missions(ms, [str(b) for b in bags], retime_speeds=False), ds, ho)[0]
     still = standstill_rows(ds, Options().standstill_sigmas)[0] if signal == "tau_m" else None
     return greedy_discover(ds, signal, ho, standstill=still)
 

@@ -1001,3 +1001,58 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         offsets=offsets, comparisons=comp, plot=plot,
     )
 
+
+
+def baseline_cv_rmse(ds: Dataset, heldout: np.ndarray, rows: np.ndarray) -> float | None:
+    """Cross-validated RMSE of the plain tau_m baseline (tanh width by the CV profile) on the fit rows ``rows``
+    (fit bags, moving); None when tau_m or the friction direction cannot be fitted."""
+    if "tau_m" not in ds.signals or "omega_m" not in ds.signals:
+        return None
+    fit = rows & ~heldout
+    if fit.sum() < Options().min_samples or len(np.unique(ds.block[fit])) < 3:
+        return None
+    sig = StateSignals(ds.signals, (ds.signals, ds.segment, {}), np.arange(ds.n)).rows_of(fit)
+    avail = {k for k, v in sig.items() if np.std(v) > 0}
+    if "omega_m" not in avail:
+        return None
+    decl = DEFAULT_DECLARED["tau_m"]
+    scale = float(np.quantile(np.abs(sig["omega_m"]), 0.9))
+    sig_w = max(speed_noise_sigma(sig["omega_m"][ds.bag[fit] == b], ds.segment[fit][ds.bag[fit] == b])
+                for b in np.unique(ds.bag[fit]))
+    lo = max(sig_w / 10, 1e-4 * scale, 1e-6)
+    hi = max(0.5 * scale, 10 * lo)
+    names = [c.param for c in baseline_columns("tau_m", avail, decl, [], 1.0, {})[0]]
+    r = _shape_rows(np.ones(int(fit.sum()), bool))
+    s_rows = _take(sig, r)
+
+    def design(sh):
+        return _baseline_matrix(baseline_columns("tau_m", avail, decl, [], sh["eps"], {})[0], s_rows)
+    f = fit_separable(sig["tau_m"][r], design, names, ds.block[fit][r], [Shape("eps", lo, hi, log=True, n_grid=12)],
+                      jackknife=False)
+    return float(f.cv_rmse)
+
+
+def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.ndarray,
+                        opt: Options | None = None) -> tuple[Dataset, str]:
+    """Logged or re-timed speeds (``data.speed_timing``), decided by the target's own data.
+
+    The speed's delay is identified against its angle; whether the angle (and so the re-timed speed) is on the
+    torque's time base is not: a logger may sample the angle at another instant than it averages the current.
+    The cross-validated error of the plain tau_m baseline on the fit bags decides (the same rows for both;
+    neither has a free parameter more than the other): the re-timed speeds are kept only when they lower it.
+    Returns the dataset to use and a statement."""
+    opt = opt or Options()
+    if not ds_retimed.speed_lags or ds_retimed.n != ds_logged.n:
+        return ds_logged, ""
+    lag = ", ".join(f"{k} {v * 1e3:.3g} ms" for k, v in ds_retimed.speed_lags.items())
+    still, _ = standstill_rows(ds_logged, opt.standstill_sigmas)
+    cv_l = baseline_cv_rmse(ds_logged, heldout, ~still)
+    cv_r = baseline_cv_rmse(ds_retimed, heldout, ~still)
+    if cv_l is None or cv_r is None:
+        return ds_logged, f"speed timing: identified delays ({lag}) not tested (no tau_m baseline); speeds used as logged"
+    if cv_r < cv_l:
+        return ds_retimed, (f"speed timing: re-timed speeds ({lag}) lower the CV error of the tau_m baseline on the "
+                            f"fit bags, {cv_l:.4g} -> {cv_r:.4g}; used")
+    ds_logged.speed_lags = {}
+    return ds_logged, (f"speed timing: re-timed speeds ({lag}) do not lower the CV error of the tau_m baseline on "
+                       f"the fit bags ({cv_l:.4g} -> {cv_r:.4g}); speeds used as logged")

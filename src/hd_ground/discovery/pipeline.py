@@ -19,7 +19,8 @@ import numpy as np
 from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
-from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout, static_term
+from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_speed_timing, discover_signal, split_fit_heldout,
+                   static_term)
 from .data import Dataset, DiscoveryError, dataset_from_missions
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
@@ -93,8 +94,6 @@ def run_discovery(
     else:
         names = [str(b) for b in bags]
     ds = dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag)
-    for n_ in ds.notes:
-        log(f"note: {n_}")
 
     twin = load_twin(twin_dir) if twin_dir else None
     declared_all = list(twin.get("declared_effects", [])) if twin else None
@@ -116,6 +115,13 @@ def run_discovery(
     if ho_bags and len(ho_bags) == len(names):
         raise DiscoveryError("every bag is held out; leave at least one bag to fit on")
     ho = split_fit_heldout(ds, ho_bags, heldout_frac)
+    if ds.speed_lags:
+        # the identified speed delays are used only when the fit bags' tau_m baseline prefers them
+        ds, st_ = choose_speed_timing(dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag,
+                                                            retime_speeds=False), ds, ho, opt)
+        ds.notes.append(st_)
+    for n_ in ds.notes:
+        log(f"note: {n_}")
     split = ({"mode": "bags", "heldout": [names[i] for i in ho_bags]} if ho_bags
              else {"mode": "time_blocks", "heldout_frac": heldout_frac, "blocks_per_bag": blocks_per_bag})
 
