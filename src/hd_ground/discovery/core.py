@@ -1038,9 +1038,10 @@ def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.nda
 
     The speed's delay is identified against its angle; whether the angle (and so the re-timed speed) is on the
     torque's time base is not: a logger may sample the angle at another instant than it averages the current.
-    The cross-validated error of the plain tau_m baseline on the fit bags decides (the same rows for both;
-    neither has a free parameter more than the other): the re-timed speeds are kept only when they lower it.
-    Returns the dataset to use and a statement."""
+    The cross-validated error of the plain tau_m baseline on the fit bags decides (the same rows for both),
+    by the rule every change of the baseline follows (the transition law's too): the re-timed speeds are kept
+    only when they lower the CV mean squared error by ``opt.min_gain``. Returns the dataset to use and a
+    statement."""
     opt = opt or Options()
     if not ds_retimed.speed_lags or ds_retimed.n != ds_logged.n:
         return ds_logged, ""
@@ -1050,9 +1051,11 @@ def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.nda
     cv_r = baseline_cv_rmse(ds_retimed, heldout, ~still)
     if cv_l is None or cv_r is None:
         return ds_logged, f"speed timing: identified delays ({lag}) not tested (no tau_m baseline); speeds used as logged"
-    if cv_r < cv_l:
+    gain = 1.0 - (cv_r / cv_l) ** 2 if cv_l > 0 else 0.0
+    if gain >= opt.min_gain:
         return ds_retimed, (f"speed timing: re-timed speeds ({lag}) lower the CV error of the tau_m baseline on the "
-                            f"fit bags, {cv_l:.4g} -> {cv_r:.4g}; used")
+                            f"fit bags, {cv_l:.4g} -> {cv_r:.4g} N*m ({gain:.1%}); used")
     ds_logged.speed_lags = {}
     return ds_logged, (f"speed timing: re-timed speeds ({lag}) do not lower the CV error of the tau_m baseline on "
-                       f"the fit bags ({cv_l:.4g} -> {cv_r:.4g}); speeds used as logged")
+                       f"the fit bags by {opt.min_gain:.0%} ({cv_l:.4g} -> {cv_r:.4g} N*m, {gain:+.1%}); speeds used "
+                       "as logged")

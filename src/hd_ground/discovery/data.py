@@ -133,6 +133,8 @@ def speed_timing(missions: list[Mission], window_s: float = 0.02) -> tuple[dict[
     every speed-dependent term in transients (a Stribeck curve fitted on lagged speeds is wrong at
     constant speed). Re-timed only when the delay is identified (|tau| > 3 SE) and small enough for the
     first-order inverse (|tau| < half the derivative window); otherwise kept as logged, with the reason.
+    Whether the angle itself is on the torque's time base is not visible here: the pipeline keeps the re-timed
+    speeds only when the fit bags' tau_m baseline prefers them (``core.choose_speed_timing``).
     """
     lags: dict[str, float] = {}
     notes: list[str] = []
