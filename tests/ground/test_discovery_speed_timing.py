@@ -4,7 +4,8 @@ A drive logs its own speed estimate: the encoder angle differenced and low-pass 
 that estimate's delay behind the angle's own rate by least squares and re-times the speed before any friction
 term sees it (a Stribeck curve fitted on lagged speeds is wrong at constant speed). Synthetic missions written
 here (numpy only): the delay of a known discrete filter is recovered, the re-timed speed is closer to the true
-rate, and a speed that is already on the angle's time base is left alone.
+rate, a speed that is already on the angle's time base is left alone, and the target's own cross-validated
+baseline error decides whether the re-timed speed is used (the torque may be on either time base).
 """
 
 from types import SimpleNamespace
@@ -59,3 +60,46 @@ def test_speed_on_the_angle_time_base_is_left_alone():
     ms = [_mission(s, None) for s in range(3)]
     lags, notes = speed_timing([m for m, _ in ms])
     assert "omega_m" not in lags and "omega_f" not in lags, notes
+
+
+def _datasets(torque_on: str, seed: int = 0):
+    """Four bags of fast reversals; the logged speed is a drive estimate (50 Hz filter); the torque's friction
+    acts on the true speed (``torque_on="true"``) or on the logged one (a torque logged with the same delay)."""
+    from hd_ground.discovery.data import Dataset, _derivative
+
+    ms = [_mission(seed + i, 50.0, duration=4.0) for i in range(4)]
+    tau, _ = speed_lag([m for m, _ in ms], "omega_m", "theta_m")
+    rng = np.random.default_rng(seed)
+    cols_l, cols_r = {}, {}
+    for m, rate in ms:
+        seg = m.segment
+        w_r = retime_speed(m.omega_m, m.t, seg, tau, 0.02)
+        w_t = rate if torque_on == "true" else m.omega_m
+        a_t = _derivative(w_t, m.t, seg, 0.02)
+        y = 0.01 * a_t + 1.0 * np.tanh(w_t / 0.5) + 0.01 * w_t + rng.normal(0, 0.02, m.n)
+        for cols, w in ((cols_l, m.omega_m), (cols_r, w_r)):
+            for k, v in (("theta_m", m.theta_m), ("omega_m", w), ("alpha_m", _derivative(w, m.t, seg, 0.02)),
+                         ("tau_m", y)):
+                cols.setdefault(k, []).append(v)
+    n = ms[0][0].n
+    bag = np.repeat(np.arange(4), n)
+    frac = np.tile(np.arange(n) / (n - 1), 4)
+    block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
+    t = np.tile(ms[0][0].t, 4)
+
+    def ds(cols, lags):
+        return Dataset({k: np.concatenate(v) for k, v in cols.items()}, bag, block, frac, t, bag.copy(),
+                       [f"bag{i}" for i in range(4)], 100.0, 0.1, speed_lags=lags)
+    return ds(cols_l, {}), ds(cols_r, {"omega_m": tau}), bag == 3
+
+
+@pytest.mark.parametrize("torque_on", ["true", "logged"])
+def test_the_target_decides_whether_retimed_speeds_are_used(torque_on):
+    from hd_ground.discovery.core import choose_speed_timing
+
+    ds_l, ds_r, ho = _datasets(torque_on)
+    ds, st = choose_speed_timing(ds_l, ds_r, ho)
+    if torque_on == "true":  # the friction acts on the speed at the angle's instants: re-timing helps
+        assert ds is ds_r and "; used" in st, st
+    else:  # the torque is on the logged speed's time base: re-timing would hurt, the logged speed is kept
+        assert ds is ds_l and "as logged" in st and ds.speed_lags == {}, st
