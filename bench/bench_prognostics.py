@@ -59,10 +59,11 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         t0 = time.perf_counter()
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
-                          seed=seed)
+                          seed=seed, threshold=THRESHOLD[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
+        sg["threshold"] = m.threshold
         per_grid.append(sg)
         per_ukf.append(su)
         per_plug.append(sp)
@@ -70,12 +71,14 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
             print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" / {su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
-                  f"{sp['coverage_p5_p95']:.2f} (ESS {m.fit_info['parameter_uncertainty'].get('ess', 0):.0f})"
+                  f"{sp['coverage_p5_p95']:.2f} (ESS {m.fit_info['parameter_uncertainty'].get('ess', 0):.0f}, "
+                  f"threshold {m.threshold})"
                   f"  [{time.perf_counter() - t0:.1f} s]", flush=True)
     return per_grid, per_ukf, per_plug
 
 
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
+THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
 
 
 def _predict_all(m, test, eol, samples, seed):
@@ -122,7 +125,7 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
             us = [unit_history(a, args.feature, e) for a in fleet]
             attach_events(us, ev)
             cands[e] = us
-        best = fit_best(cands, feature=args.feature, n_draws=0)
+        best = fit_best(cands, feature=args.feature, n_draws=0, threshold=THRESHOLD[0])
         exposure = best.exposure
         res["exposure_choice"] = best.fit_info["exposure_candidates"]
         print(f"{name}: exposure by maximum likelihood on all of {name}: {exposure} "
@@ -221,10 +224,14 @@ def main(argv=None) -> int:
     ap.add_argument("--particles", type=int, default=1000, help="reference PF particles")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--draws", type=int, default=20, help="posterior parameter draws per life-model fit")
+    ap.add_argument("--threshold", default="auto", choices=("auto", "latent", "observable"),
+                    help="failure threshold on the latent state, on the observable HI, or chosen by maximum "
+                         "likelihood in every fit (training units only)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--no-reference", action="store_true")
     args = ap.parse_args(argv)
     DRAWS[0] = args.draws
+    THRESHOLD[0] = args.threshold
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
@@ -272,23 +279,30 @@ def main(argv=None) -> int:
         table[n] = {"life model": _row(r["life"]), "UKF on it": _row(r["ukf"]), "plug-in": _row(r.get("plugin", [])),
                     "threshold bound": float(np.mean(list(r["bound"].values()))) if r.get("bound") else None,
                     "reference": _row(r.get("reference", [])), "exposure": r.get("exposure"),
-                    "reference_name": r.get("reference_name"), "seconds": r.get("seconds")}
+                    "reference_name": r.get("reference_name"), "seconds": r.get("seconds"),
+                    "threshold": _thr(r["life"])}
     (out / "bench_prognostics.json").write_text(json.dumps({"table": table, "results": results}, indent=1,
                                                            default=lambda o: float(o) if np.isscalar(o) else str(o)))
     print()
-    print("| dataset | units scored | clock | life model: in-cone / P5-P95 cov / CRA / CRPS | UKF on it | "
+    print("| dataset | units scored | clock | threshold (folds) | life model: in-cone / P5-P95 cov / CRA / CRPS | UKF on it | "
           "plug-in point estimate (no parameter draws) | reference | reference model | "
           "in-cone bound (true wear, population threshold) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for n, t in table.items():
         f = lambda r: (f"{r['frac_in_cone_lambda_ge_0.5']:.2f} / {r['coverage_p5_p95']:.2f} / {r['cra']:.2f} / "
                        f"{r['crps_mean']:.3g}" if r["n"] else "-")
-        print(f"| {n} | {t['life model']['n']} | {t['exposure']} | {f(t['life model'])} | {f(t['UKF on it'])} | "
+        print(f"| {n} | {t['life model']['n']} | {t['exposure']} | {t['threshold']} | {f(t['life model'])} | {f(t['UKF on it'])} | "
               f"{f(t['plug-in'])} | "
               f"{f(t['reference'])} | {t['reference_name'] or '-'} | "
               f"{'-' if t['threshold bound'] is None else format(t['threshold bound'], '.2f')} |")
     print(f"\nwrote {out}/bench_prognostics.json; {time.perf_counter() - t_all:.0f} s in all")
     return 0
+
+
+def _thr(rows):
+    """Which threshold the folds' fits chose, e.g. 'observable 3/3'."""
+    ks = [r.get("threshold") for r in rows if r.get("threshold")]
+    return ", ".join(f"{k} {ks.count(k)}/{len(ks)}" for k in dict.fromkeys(ks)) or "-"
 
 
 def csv_dataset_every(name, hi, events, args):
@@ -316,17 +330,18 @@ def _louo_subset(units, eols, args, name):
             continue
         t0 = time.perf_counter()
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
-                          time_unit="step", n_draws=DRAWS[0], seed=args.seed)
+                          time_unit="step", n_draws=DRAWS[0], seed=args.seed, threshold=THRESHOLD[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
+        sg["threshold"] = m.threshold
         per_grid.append(sg)
         per_ukf.append(su)
         per_plug.append(sp)
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
-              f"{sp['coverage_p5_p95']:.2f}  [{time.perf_counter() - t0:.1f} s]", flush=True)
+              f"{sp['coverage_p5_p95']:.2f} (threshold {m.threshold})  [{time.perf_counter() - t0:.1f} s]", flush=True)
     return per_grid, per_ukf, per_plug
 
 
