@@ -48,7 +48,7 @@ def _row(ms):
     return out
 
 
-def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, label):
+def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, label, level=None):
     """Leave-one-unit-out: life model (grid posterior) and UKF on it; units with a failure are scored."""
     from hd_prognostic.lifemodel import LifeModel, UnitEvents, predict_history
 
@@ -59,7 +59,7 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         t0 = time.perf_counter()
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
-                          seed=seed, threshold=THRESHOLD[0])
+                          seed=seed, threshold=THRESHOLD[0], failure_level=level)
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
@@ -196,14 +196,14 @@ def events_fleet(name, fleet_dir, exposure, args):
             "reference_name": "- (no wear truth in these bags)"}
 
 
-def csv_dataset(name, hi, events, args):
+def csv_dataset(name, hi, events, args, level=None):
     from hd_prognostic.lifemodel import attach_events, read_events, read_hi_csv
 
     units = read_hi_csv(hi)
     ev = read_events(events)
     attach_events(units, ev, str(events))
     eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
-    g, u, pl = _louo(units, eols, "csv exposure", "step", "hi", args.samples, args.seed, True, name)
+    g, u, pl = _louo(units, eols, "csv exposure", "step", "hi", args.samples, args.seed, True, name, level)
     return {"exposure": "time column", "life": g, "ukf": u, "plugin": pl}
 
 
@@ -227,6 +227,9 @@ def main(argv=None) -> int:
     ap.add_argument("--threshold", default="auto", choices=("auto", "latent", "observable"),
                     help="failure threshold on the latent state, on the observable HI, or chosen by maximum "
                          "likelihood in every fit (training units only)")
+    ap.add_argument("--no-known-level", dest="known_level", action="store_false",
+                    help="NASA / Virkler: fit the observable threshold's level instead of taking it from the failure "
+                         "definition (80 %% of rated capacity, 49.8 mm)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--no-reference", action="store_true")
     args = ap.parse_args(argv)
@@ -252,21 +255,23 @@ def main(argv=None) -> int:
         results[n] = events_fleet(n, d, exposure or "load", args)
         results[n]["seconds"] = time.perf_counter() - t0
     if args.nasa:
-        from hd_prognostic.realdata import battery_records, run_battery
+        from hd_prognostic.realdata import RATED_AH, battery_records, run_battery
 
         t0 = time.perf_counter()
         hi, ev = battery_records(args.nasa, out, eol_frac=0.8)
-        results["nasa"] = csv_dataset("nasa", hi, ev, args)
+        # failure defined on the measured capacity: its level (80 % of rated) is the failure definition
+        results["nasa"] = csv_dataset("nasa", hi, ev, args, level=0.8 * RATED_AH if args.known_level else None)
         r = run_battery(args.nasa, eol_fracs=(0.8,), n_particles=args.particles, seed=args.seed)
         results["nasa"]["reference"] = [dict(u["metrics"], unit=k) for k, u in r["units"].items()]
         results["nasa"]["reference_name"] = "exponential-fade PF, leave-one-cell-out prior (realdata.run_battery)"
         results["nasa"]["seconds"] = time.perf_counter() - t0
     if args.virkler:
-        from hd_prognostic.realdata import run_virkler, virkler_records
+        from hd_prognostic.realdata import VIRKLER_LENGTHS_MM, run_virkler, virkler_records
 
         t0 = time.perf_counter()
         hi, ev = virkler_records(args.virkler, out)
-        res = csv_dataset_every("virkler", hi, ev, args)
+        res = csv_dataset_every("virkler", hi, ev, args,  # failure defined as the measured length reaching 49.8 mm
+                                level=VIRKLER_LENGTHS_MM[-1] * 1e-3 if args.known_level else None)
         r = run_virkler(args.virkler, n_particles=args.particles, seed=args.seed)
         scored = {m["unit"] for m in res["life"]}  # the same specimens as the life model's rows
         res["reference"] = [dict(u["metrics"], unit=f"specimen{k}") for k, u in r["units"].items()
@@ -305,7 +310,7 @@ def _thr(rows):
     return ", ".join(f"{k} {ks.count(k)}/{len(ks)}" for k in dict.fromkeys(ks)) or "-"
 
 
-def csv_dataset_every(name, hi, events, args):
+def csv_dataset_every(name, hi, events, args, level=None):
     """csv_dataset, scoring every k-th unit (``--virkler-every``) while each fit uses all the others."""
     from hd_prognostic.lifemodel import attach_events, read_events, read_hi_csv
 
@@ -316,11 +321,11 @@ def csv_dataset_every(name, hi, events, args):
     k = max(1, args.virkler_every)
     scored = {u.unit for u in units[::k]}
     keep = {u: t for u, t in eols.items() if u in scored}
-    g, u, pl = _louo_subset(units, keep, args, name)
+    g, u, pl = _louo_subset(units, keep, args, name, level)
     return {"exposure": "time column", "life": g, "ukf": u, "plugin": pl, "scored_every": k}
 
 
-def _louo_subset(units, eols, args, name):
+def _louo_subset(units, eols, args, name, level=None):
     """Leave-one-unit-out scoring the units in ``eols`` only (each fit uses all the other units)."""
     from hd_prognostic.lifemodel import LifeModel, UnitEvents
 
@@ -330,7 +335,8 @@ def _louo_subset(units, eols, args, name):
             continue
         t0 = time.perf_counter()
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
-                          time_unit="step", n_draws=DRAWS[0], seed=args.seed, threshold=THRESHOLD[0])
+                          time_unit="step", n_draws=DRAWS[0], seed=args.seed, threshold=THRESHOLD[0],
+                          failure_level=level)
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)

@@ -280,7 +280,8 @@ def _fit_life(args) -> int:
                                               cache=args.cache, workers=args.workers, progress=True)
     for n in dict.fromkeys(notes):
         print(f"note: {n}", file=sys.stderr)
-    m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws, threshold=args.threshold)
+    m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws, threshold=args.threshold,
+                 failure_level=args.failure_level)
     m.to_json(args.out)
     fi = m.fit_info
     print(json.dumps({"exposure": m.exposure, "E_ref": m.E_ref, **m.to_json()["readable"],
@@ -416,6 +417,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold", choices=("auto", "latent", "observable"), default="auto",
                    help="failure threshold on the latent degradation or on the measured HI; auto: the "
                         "maximum-likelihood one (same parameter count, so also the AIC choice)")
+    p.add_argument("--failure-level", type=float, default=None, metavar="HI",
+                   help="when failure is defined as the measured HI reaching a known level (e.g. 1.6 Ah, 0.0498 m): "
+                        "that level, the observable threshold's median (not fitted then)")
     p.set_defaults(func=_guard(_fit_life))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")

@@ -20,6 +20,10 @@ Model (latent degradation path, population of units):
   fixes the latent scale; ``c`` is the HI change at the median threshold);
 * inspection of quantity q: ``v = alpha_q + beta_q L_i + N(0, tau_q^2)`` (population-level map, fitted
   when the quantity has >= 4 inspections in the fleet; otherwise ignored with a note).
+* or (``threshold="observable"``) failure when the *measured* HI crosses the unit's level ``Y_i ~ N(Y0, s_Y^2)``
+  in the direction of ``c`` (failure defined on a measurement: capacity fraction, crack length, a lost-motion
+  limit); the latent scale is then fixed by ``mu = 0``. ``threshold="auto"`` fits both and keeps the higher
+  maximum likelihood (same number of parameters: also the AIC choice); never chosen per scored unit.
 
 Likelihood of unit i (exact up to a 1-D quadrature over ``z = ln r_i``, on an adaptive grid):
 ``p_i = int N(z; mu, s) p(y_i | z) prod_insp p(v | z) P(event | z) dz`` with
@@ -28,7 +32,17 @@ it failed between its last record and the mission it was found failed at) and
 ``P(survive to E_c | z) = Phi(-(z + b ln E_c)/s_D)``. All parameters by maximum likelihood (L-BFGS-B, then a
 short Nelder-Mead polish, on the summed log marginal likelihood, started from per-unit least squares).
 
-Prognosis of one unit at time t_k: the posterior over z on the same grid (its HI and inspections up to t_k,
+Observable threshold (given z, the offset's conditional law given the record is normal, so the event terms stay
+closed-form): ``P(failure) = P(M < Y <= y_f) ~ Phi((m_f - Y0)/sqrt(s_Y^2 + v_f)) - Phi((M - Y0)/s_Y)`` (oriented by
+the sign of c), ``y_f ~ N(m_f, v_f)`` the unrecorded HI at the failure time (offset posterior, AR(1) residual carried
+on from the last record), M the record's extreme; censored: ``P(Y > M)``. Its prognosis simulates the unit's future
+HI records from its posterior until they pass a threshold drawn from its law truncated to ``Y > M``.
+
+Parameter draws: uniform prior on the standard deviations with >= 3 failures (Gelman 2006's default); with 2, where
+that posterior is improper, half-Cauchy priors on the between-unit scales (``s``: scale 1, ``s_a`` and ``s_Y``: the
+HI's standard deviation over the training records, ``s_D``: 1), Gelman's recommendation for few groups.
+
+Prognosis of one unit at time t_k (latent threshold): the posterior over z on the same grid (its HI and inspections up to t_k,
 survival to ``E(t_k)``), then ``ln D`` from its prior truncated to ``ln D > z + b ln E(t_k)``, the failure
 exposure ``E_f = E_ref (D / r)^(1/b)`` and the failure time from the unit's own exposure rate.
 """
@@ -700,13 +714,16 @@ class LifeModel:
     @classmethod
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
-            seed: int = 0, threshold: str = "latent") -> "LifeModel":
+            seed: int = 0, threshold: str = "latent", failure_level: float | None = None) -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
-        when the measured HI crosses Y_i) or ``auto`` (both fitted, the higher maximum likelihood kept: both
-        have 9 population parameters, so this is also the AIC choice; the log-likelihoods go to
-        ``fit_info["threshold_candidates"]``). ``n_draws`` posterior draws of the population parameters
+        when the measured HI crosses Y_i) or ``auto`` (both fitted, the lower AIC kept, i.e. the higher maximum
+        likelihood when both have 9 population parameters; the log-likelihoods go to
+        ``fit_info["threshold_candidates"]``). ``failure_level``: the HI level that defines failure when the
+        failure definition is on the measured HI and its level is known (NASA: 80 % of rated capacity, Virkler:
+        49.8 mm): the observable threshold's median Y0 is then fixed there (its scatter s_Y still fitted) instead
+        of being estimated from the gap between the last record and the unrecorded value at failure. ``n_draws`` posterior draws of the population parameters
         (:func:`_posterior_draws`; 0: point estimate only) carry the parameter uncertainty of a small fleet into
         the prognosis."""
         if threshold not in THRESHOLDS + ("auto",):
@@ -782,6 +799,10 @@ class LifeModel:
                           log_sY=math.log(max(float(np.std(yfa)), 0.5 * sig0)))
                 ysc = sig0 + abs(t0["Y0"]) * 0.01
                 scale = [1.0, 1.0, abs(t0["c"]), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, ysc, 1.0, 1.0]
+                if failure_level is not None:  # the failure definition's level is known: Y0 is not fitted
+                    j = names.index("Y0")
+                    names.pop(j)
+                    scale.pop(j)
             sc = np.array(scale + iscale)
             x0 = np.array([t0[k] for k in names] + ix0) / sc
             npar = len(names)
@@ -792,6 +813,8 @@ class LifeModel:
                 th = dict(zip(names, x[:npar]))
                 if kind == "observable":
                     th["mu"] = 0.0
+                    if failure_level is not None:
+                        th["Y0"] = float(failure_level)
                 ins = {q: {k: float(x[npar + 3 * j + i]) for i, k in enumerate(("alpha", "beta", "log_tau"))}
                        for j, q in enumerate(qs)}
                 return th, ins
@@ -823,14 +846,15 @@ class LifeModel:
             r2 = optimize.minimize(nll, x1, method="Nelder-Mead",
                                    options={"maxiter": maxiter, "maxfev": maxiter, "xatol": 1e-4, "fatol": 1e-3,
                                             "adaptive": True})
-            return {"names": names, "unpack": unpack, "nll": nll, "r": r, "r2": r2}
+            return {"names": names, "unpack": unpack, "nll": nll, "r": r, "r2": r2,
+                    "aic": 2.0 * (len(names) + 3 * len(qs)) + 2.0 * float(r2.fun)}
 
         kinds = THRESHOLDS if threshold == "auto" else (threshold,)
         fits = {k: ml(k) for k in kinds}
         for k, v in fits.items():
             if progress:
                 print(f"  threshold {k}: log-likelihood {-v['r2'].fun:.2f}", flush=True)
-        kind = min(fits, key=lambda k: fits[k]["r2"].fun)
+        kind = min(fits, key=lambda k: fits[k]["aic"])
         F = fits[kind]
         unpack, nll, r, r2 = F["unpack"], F["nll"], F["r"], F["r2"]
         th, ins = unpack(r2.x)
@@ -877,10 +901,14 @@ class LifeModel:
                 "lbfgs_loglik": float(-r.fun), "converged": bool(r2.success),
                 "start": theta0, "notes": notes, "units": [u.unit for u in units],
                 "rate_median": float(np.nanmedian([u.rate() for u in units])),
+                "record_spacing": float(np.median([np.median(np.diff(u.t)) for u in units])),
                 "hours_per_step": (float(np.median(hp)) if (hp := [u.hours_per_step for u in units
                                                                   if u.hours_per_step]) else None)}
         if len(fits) > 1:
             info["threshold_candidates"] = {k: float(-v["r2"].fun) for k, v in fits.items()}
+            info["threshold_aic"] = {k: float(v["aic"]) for k, v in fits.items()}
+        if kind == "observable" and failure_level is not None:
+            info["failure_level"] = float(failure_level)
         return cls(th, E_ref, exposure, feature, ins, info, time_unit, draws=draws)
 
     def members(self) -> list["LifeModel"]:
@@ -980,7 +1008,8 @@ class LifeModel:
         bad = ~np.isfinite(x) | (x < lo)
         x[bad] = lo + np.abs(rng.standard_normal(int(bad.sum()))) * 0.1
         Yo = sg * th["Y0"] + sc * x  # oriented threshold
-        dt = 1.0 if h.discrete else (float(np.median(np.diff(h.t))) if len(h.t) >= 2 else 1.0)
+        dt = 1.0 if h.discrete else (float(np.median(np.diff(h.t))) if len(h.t) >= 2
+                                     else float(self.fit_info.get("record_spacing") or rate_scale(self, rate)))
         E_last = h.exposure_at(t_last)
 
         def expo(tt):
@@ -1028,6 +1057,11 @@ class LifeModel:
         c = np.cumsum(w)
         q = np.interp([0.05, 0.5, 0.95], c, z)
         return tuple(float(np.exp(v) * X) for v in q)
+
+
+def rate_scale(model: "LifeModel", rate: float) -> float:
+    """Record spacing for a model file without ``record_spacing``: 1/20 of the reference exposure in time."""
+    return max(model.E_ref / max(rate, 1e-300) / 20.0, 1e-12)
 
 
 def _split(n: int, k: int) -> list[int]:
@@ -1176,7 +1210,8 @@ class _UKF:
 
 
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
-             progress: bool = False, n_draws: int = 20, threshold: str = "auto") -> LifeModel:
+             progress: bool = False, n_draws: int = 20, threshold: str = "auto",
+             failure_level: float | None = None) -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
@@ -1184,7 +1219,7 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     for name, units in candidates.items():
         try:
             fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
-                                       threshold=threshold)
+                                       threshold=threshold, failure_level=failure_level)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -1196,7 +1231,7 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     m = fits[best]
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
         m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
-                          threshold=m.threshold)
+                          threshold=m.threshold, failure_level=failure_level)
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
     m.fit_info["exposure_candidates"] = {k: f.fit_info["log_likelihood"] for k, f in fits.items()}
     if errs:

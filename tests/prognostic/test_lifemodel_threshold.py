@@ -79,3 +79,15 @@ def test_two_failures_get_draws_under_a_proper_prior(obs_fleet):
     u.events = UnitEvents()
     h = predict_history(m, u, n_samples=100, seed=0)
     assert h.meta["parameter_draws"] == 10 and np.all(np.isfinite(h.p50))
+
+
+def test_known_failure_level_fixes_the_observable_threshold(obs_fleet):
+    """A failure definition with a known level (80 % capacity, 49.8 mm): Y0 is not fitted (one parameter less
+    in the AIC) and the fitted scatter around it stays of the order of the HI noise."""
+    units, _, _ = obs_fleet
+    m = LifeModel.fit(units, threshold="auto", failure_level=TRUTH_OBS["Y0"], n_draws=0)
+    assert m.threshold == "observable" and m.theta["Y0"] == TRUTH_OBS["Y0"]
+    assert m.fit_info["failure_level"] == TRUTH_OBS["Y0"]
+    cand, aic = m.fit_info["threshold_candidates"], m.fit_info["threshold_aic"]
+    assert aic["observable"] == pytest.approx(2 * 8 - 2 * cand["observable"])
+    assert math.exp(m.theta["log_sY"]) < 3 * TRUTH_OBS["sigma"]
