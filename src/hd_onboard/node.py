@@ -5,7 +5,9 @@ delegate to the core and publish what it produced. Subscriptions take raw CDR an
 whole queue per callback, so the core sees blocks (``hd_ros.convert.take_all``). The twin state is
 read by :func:`hd_twin.state.read_state`, window features are computed off the flag path by
 :class:`hd_onboard.windowpool.WindowFeaturePool`, the diagnostics' content comes from
-:mod:`hd_onboard.status`.
+:mod:`hd_onboard.status`, when rows / features / diagnostics go out (and the STALE watchdog) from
+:class:`hd_onboard.publishing.PublishSchedule`; ``rt_thread`` puts joint states on their own thread
+(:class:`hd_ros.rtthread.RtSubscription`).
 
 Subscribes: ``/hd/joint_states``, ``/hd/command``, ``/hd/temperature``
 (sensor QoS), ``/hd/mission`` (JSON ``hd_mission`` metadata, latched: a new

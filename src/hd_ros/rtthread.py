@@ -25,8 +25,8 @@ class RtSubscription:
 
     def __init__(self, context, node_name: str, msg_type, topic: str, callback: Callable[[Any], None], qos_profile, *,
                  priority: int = 0, gate: Callable[[], bool] | None = None, lock=None, raw: bool = False,
-                 thread_name: str = "rt-subscription", label: str = "subscription", log: Callable[[str, str], None] | None = None,
-                 executor_kind: str | None = None):
+                 thread_name: str = "rt-subscription", label: str = "subscription",
+                 log: Callable[[str, str], None] | None = None, executor_kind: str | None = None):
         from rclpy.node import Node
 
         from hd_ros.context import make_executor
