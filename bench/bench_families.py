@@ -195,7 +195,7 @@ def run_prog_case(world: str, out: Path, *, units: int, missions: int, duration:
                  cra=ag.get("cra"), n_scored=ag.get("n_units"), censored=s.get("censored"))
     else:
         from hd_prognostic import metrics as M
-        from hd_prognostic.hd import DEFAULT_OBS_MODEL, fit_population, prognose
+        from hd_prognostic.pipeline import DEFAULT_OBS_MODEL, fit_population, prognose
         from hd_prognostic.observation import ObservationModel
 
         try:

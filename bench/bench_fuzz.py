@@ -217,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
             _bag_case(p, hs, True, hpeaks, name)
         t_bags = time.perf_counter() - t0
         from hd_twin import state as sv
-        from hd_twin.node import apply_update, initial_state
+        from hd_twin.state import apply_update, initial_state
 
         s0 = initial_state()
         us = {"tried": 0, "applied": 0, "refused": 0, "unclean": 0, "examples": []}

@@ -39,7 +39,7 @@ PUBLISHER = textwrap.dedent('''
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
     from synth import make_mission
-    from hdphm import rosutil as ru
+    import hd_ros as ru
     ctx = ru.init_context({domain})
     node = Node("bench_pub", context=ctx)
     pub = node.create_publisher(JointState, ru.TOPIC_JOINT_STATES, ru.qos("sensor"))
@@ -78,13 +78,13 @@ def core_bench(a) -> None:
     from hd_onboard.core import OnboardCore
     from hd_onboard.windows import window_row
     from hd_onboard.expected import make_expected
-    from hd_onboard.node import _feature_fn
+    from hd_onboard.features import window_feature_fn
     from hd_twin import physics as ph
 
     m = make_mission(duration=a.seconds, seed=0, fault_at=a.seconds * 0.7)
     stamps = m.t0_ns + np.round(m.t * 1e9).astype(np.int64)
     V = np.column_stack([m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red])
-    ff = _feature_fn({}, m.meta.gear_ratio)
+    ff = window_feature_fn({}, m.meta.gear_ratio)
     kinds = [("standin", "")] + ([("onnx", a.model_dir)] if a.model_dir else [])
     for kind, md in kinds:
         p = ph.TwinParams.from_yaml().with_meta(gear_ratio=m.meta.gear_ratio)
@@ -131,7 +131,7 @@ def node_bench(a) -> None:
     from sensor_msgs.msg import JointState
 
     from hd_onboard.node import make_node
-    from hdphm import rosutil as ru
+    import hd_ros as ru
 
     synth = os.path.join(HERE, "..", "tests", "onboard")
     out = {}

@@ -108,7 +108,7 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
     """Events from fleet_truth.json (failure missions), histories from contract topics, LOUO; the
     wear-truth-calibrated PF as the upper reference."""
     from hd_prognostic.evaluate import load_fleet
-    from hd_prognostic.hd import fit_population, prognose, unit_history
+    from hd_prognostic.pipeline import fit_population, prognose, unit_history
     from hd_prognostic.lifemodel import UnitEvents, attach_events, write_events
 
     truth = json.loads((Path(fleet_dir) / "fleet_truth.json").read_text())
@@ -182,7 +182,7 @@ def threshold_bound(truth, eols):
 def events_fleet(name, fleet_dir, exposure, args):
     """A fleet of bags with the operator's own ``events.csv`` (e.g. the independent plant's fleet: failures
     and inspections); scored against the failures in that file. No wear-truth reference (no /sim topics)."""
-    from hd_prognostic.hd import load_fleet_histories, unit_history
+    from hd_prognostic.pipeline import load_fleet_histories, unit_history
     from hd_prognostic.lifemodel import attach_events, read_events
 
     ev = read_events(Path(fleet_dir) / "events.csv")

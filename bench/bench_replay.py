@@ -14,7 +14,7 @@ their ratios:
   messages between pumps / with Fast DDS asynchronous publication (both
   measured slower or no faster here, so not the defaults).
 
-Each stack run is :func:`hdphm.ros_cli.run_stack_on_bags` as the demo uses it:
+Each stack run is :func:`hdphm.stack.run_stack_on_bags` as the demo uses it:
 every contract message goes through DDS to the onboard node (counts checked
 on every run), the recorder files the replayed contract messages from the
 replayer (same bytes, per block) and records the stack's own topics through
@@ -34,8 +34,9 @@ import time
 def _baseline(bag: str, domain_id: int) -> float:
     from sensor_msgs.msg import JointState
 
-    from hdphm import rosutil as ru
-    from hdphm.ros_cli import Replayer, Stack
+    import hd_ros as ru
+    from hd_ros.replay import Replayer
+    from hdphm.stack import Stack
 
     st = Stack(domain_id, nodes=())
     try:
@@ -72,8 +73,8 @@ def main(argv=None) -> int:
     from synth import make_mission
 
     from hd_bag import write_mission
-    from hdphm import rosutil as ru
-    from hdphm.ros_cli import run_stack_on_bags
+    import hd_ros as ru
+    from hdphm.stack import run_stack_on_bags
 
     d = tempfile.mkdtemp()
     bag = os.path.join(d, "m.mcap")
@@ -105,7 +106,7 @@ def main(argv=None) -> int:
 
 
 def _stack(bag: str, d: str, dom: int, **kw) -> float:
-    from hdphm.ros_cli import run_stack_on_bags
+    from hdphm.stack import run_stack_on_bags
 
     s = run_stack_on_bags([bag], out_mcap=os.path.join(d, f"rec{dom}.mcap"), domain_id=dom, progress=False, **kw)
     if s["received_onboard"] != s["published"] or any(s["recorded"][t] != n for t, n in s["published"].items()):

@@ -2,10 +2,12 @@
 
 The order (docs/ARCHITECTURE.md, "Layers"), lowest first::
 
-    hd_bag  <  hd_twin  <  hd_onboard  <  hd_prognostic  <  hd_ground  <  hdphm
+    hd_bag  <  hd_ros  <  hd_twin  <  hd_onboard  <  hd_prognostic  <  hd_ground  <  hdphm
     hd_bag  <  hd_sim (the plant: a side branch, imported only by hdphm, tests, bench)
 
-A package may import only packages below it. ``hd_sim`` imports only ``hd_bag``; of the packages
+A package may import only packages below it. ``hd_ros`` (ROS plumbing: topics, QoS, contexts,
+conversion, managed node base, replay and record runtimes) imports only ``hd_bag``. ``hd_sim``
+imports only ``hd_bag`` (not ``hd_ros``); of the packages
 in ``src/`` only ``hdphm`` (CLI, demo, scoring harness) may import ``hd_sim``, and the estimator
 packages (hd_twin, hd_onboard, hd_prognostic, hd_ground) never do: that rule has no exceptions.
 
@@ -13,9 +15,9 @@ Every import counts: module level, inside functions, under ``if TYPE_CHECKING`` 
 Imports are read with :mod:`ast` (nothing is imported), relative imports are resolved, and
 ``from pkg import mod`` counts as an import of the module ``pkg.mod``.
 
-``ALLOWED`` lists the violations the code had when this test was written, each with the
-requirement of issue 16 that removes it. The test fails on any violation not in it and on any
-entry that is no longer needed: the list can only shrink.
+``ALLOWED_UPWARD`` / ``ALLOWED_CYCLES`` listed the violations the code had when this test was
+written, each with the requirement of issue 16 that removed it; both are empty now. The test fails
+on any violation not in them and on any entry that is no longer needed: the lists can only shrink.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from pathlib import Path
 SRC = Path(__file__).resolve().parent.parent / "src"
 
 #: estimator / CBM stack, lowest first (a package may import those before it)
-ORDER = ("hd_bag", "hd_twin", "hd_onboard", "hd_prognostic", "hd_ground", "hdphm")
+ORDER = ("hd_bag", "hd_ros", "hd_twin", "hd_onboard", "hd_prognostic", "hd_ground", "hdphm")
 #: the plant: imports hd_bag only, imported (inside src/) by hdphm only
 PLANT = "hd_sim"
 ESTIMATORS = ("hd_twin", "hd_onboard", "hd_prognostic", "hd_ground")
@@ -41,26 +43,13 @@ def allowed_packages(pkg: str) -> set[str]:
     return lower | {PLANT} if pkg == "hdphm" else lower
 
 
-# Existing upward imports, (importing module, imported module). Each is removed by issue 16:
-#   R1 = requirement 1 (hd_ros bottom layer: rosutil/managed/replay/record leave hdphm; the stack
-#        assembling the nodes moves to hdphm/stack.py; nodes import downwards only),
-#   R2 = requirement 2 (node shells; shared pure helpers move down: hd_twin/state.py, trackers),
-#   R3 = requirement 3 (one robust-threshold function: the onboard <-> ground circle gone).
-ALLOWED_UPWARD: set[tuple[str, str]] = {
-    # R1: the four node shells import the ROS plumbing from the CLI package
-    ("hd_twin.node", "hdphm.rosutil"), ("hd_twin.node", "hdphm.managed"),
-    ("hd_onboard.node", "hdphm.rosutil"), ("hd_onboard.node", "hdphm.managed"),
-    ("hd_prognostic.node", "hdphm.rosutil"), ("hd_prognostic.node", "hdphm.managed"),
-    ("hd_ground.node", "hdphm.rosutil"), ("hd_ground.node", "hdphm.managed"),
-    # R2: the twin node borrows the onboard node's helpers and validates states with the detector's
-    #     ChannelThreshold / StiffnessReference / FrictionReference (validation moves to hd_twin/state.py)
-    ("hd_twin.node", "hd_onboard.node"), ("hd_twin.node", "hd_onboard.detector"),
-    # R3: the onboard evaluation tooling calls the ground's per-actuator reference calibration (the
-    #     threshold circle is gone: hd_onboard.calibration.robust_threshold serves both)
-    ("hd_onboard.evaluate", "hd_ground.references"),
-    # R1: `python -m hd_sim.cli` runs the hdphm CLI (the plant's CLI entry goes with the CLI split)
-    ("hd_sim.cli", "hdphm.cli"),
-}
+# Upward imports still allowed, (importing module, imported module). Empty: issue 16 removed every
+# one the code had (R1: the ROS plumbing, rosutil/managed/replay/record, moved down to hd_ros and the
+# stack to hdphm/stack.py; `python -m hd_sim.cli` builds its own parser. R2: node shells import
+# downwards only, twin-state records and merging live in hd_twin, node helpers in hd_ros. R3: the
+# onboard evaluation takes the ground's calibration as an argument, calibrate=, as it takes the
+# plant's simulate=). The test fails on any new upward import.
+ALLOWED_UPWARD: set[tuple[str, str]] = set()
 
 # Existing import circles between modules of one package (strongly connected sets of modules).
 #   R4 = requirement 4 (hd_twin/modeldir.py: model format, save/load and config reader in one place).

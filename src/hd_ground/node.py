@@ -4,18 +4,12 @@ On start (``run_on_start``) and whenever a message arrives on
 ``/hd/ground/trigger`` (std_msgs/String, any content), it analyses the
 mission archive ``archive_dir`` in a worker thread (the executor keeps
 serving the other nodes): per actuator, the first ``healthy_missions``
-missions (in ``mission_index`` order) are taken as healthy reference. The
-friction/inertia parameters are first re-estimated by least squares on all of
-them (``hd_ground.recalibration``); then, per actuator, the onboard core runs
-on its reference missions in batch with those parameters and the twin of
-``model_dir`` (same code as onboard, so the residuals are the ones the onboard
-node will see), and ``hd_ground.references.calibrate_actuator`` gives the
-per-channel residual lines (``thresholds``) and the healthy laws of the
-stiffness and friction monitors (``references``, fitted on all the reference
-samples). The result is pushed as one JSON update on ``/hd/twin/update``
-(``params``, ``thresholds``, ``references``; the twin core validates it, bumps
-its revision and republishes the state the onboard node applies per actuator)
-and a report on ``/hd/ground/report``.
+missions (in ``mission_index`` order) are taken as healthy reference
+(:func:`hd_ground.analysis.analyse_archive`: recalibrated parameters, per-channel residual lines
+``thresholds`` and the stiffness/friction monitors' healthy laws ``references``). The result is
+pushed as one JSON update on ``/hd/twin/update`` (``params``, ``thresholds``, ``references``; the
+twin core validates it, bumps its revision and republishes the state the onboard node applies per
+actuator) and a report on ``/hd/ground/report``. This module is the ROS shell only.
 """
 
 from __future__ import annotations
@@ -24,7 +18,12 @@ import threading
 import time
 from typing import Any
 
-from hdphm import rosutil as ru
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+import hd_ros as ru
+from hd_ground.analysis import analyse_archive
+from hd_ros.managed import ManagedNode, bring_up
 
 NODE_NAME = "ground"
 TOPIC_TRIGGER = "/hd/ground/trigger"
@@ -41,131 +40,80 @@ PARAMS: dict[str, Any] = {
 }
 
 
-def analyse_archive(archive_dir: str, healthy_missions: int = 3, do_recal: bool = True, log=print,
-                    model_dir: str = "", config=None) -> tuple[dict, dict]:
-    """(twin update, report) from a mission archive (pure: no ROS).
+class GroundNode(ManagedNode):
+    def __init__(self, context=None, overrides: dict[str, Any] | None = None, param_services: bool = True):
+        super().__init__(NODE_NAME, PARAMS, overrides, context=context, param_services=param_services)
+        self.n_runs = 0
 
-    ``model_dir``: the twin the onboard node runs ("" physics stand-in); ``config``: its
-    :class:`hd_onboard.core.OnboardConfig` (default: the core's defaults).
-    """
-    from hd_ground.analytics import load_archive, mission_summary
-    from hd_ground.recalibration import recalibrate
-    from hd_ground.references import calibrate_actuator
-    from hd_twin import physics as ph
+    def configure(self):
+        self.pub_update = self.create_publisher(String, ru.TOPIC_TWIN_UPDATE, ru.qos("latched"))
+        self.pub_report = self.create_publisher(String, ru.TOPIC_GROUND_REPORT, ru.qos("latched"))
+        self.create_subscription(String, TOPIC_TRIGGER, lambda m: self.start(), ru.qos("stream"))
+        self.create_service(Trigger, SERVICE_ANALYSE, self._on_analyse)
+        self.result: tuple[dict, dict] | None = None
+        self.error: str | None = None
+        self.busy = False
+        self._lock = threading.Lock()
+        self.create_timer(0.2, self._deliver)
+        ru.contain_callbacks(self, "hdphm/ground")  # no exception of a callback stops the node
 
-    if healthy_missions < 1 or healthy_missions > 10**5:
-        raise ValueError(f"healthy_missions = {healthy_missions} must be in 1..1e5")
-    arch = load_archive(archive_dir, log=log)
-    if not arch:
-        raise ValueError(f"{archive_dir}: no readable missions")
-    params = ph.TwinParams.from_yaml()
-    update: dict[str, Any] = {"thresholds": {}, "references": {}, "updated_by": "ground"}
-    report: dict[str, Any] = {"archive_dir": str(archive_dir), "actuators": {}}
-    healthy_all = [m for missions in arch.values() for m in missions[:healthy_missions]]
-    if do_recal:  # first: lines and references are fitted on the residuals of the parameters pushed with them
+    def activate(self):
+        if self.p["run_on_start"] and self.p["archive_dir"]:
+            self.start()
+
+    def start(self) -> tuple[bool, str]:
+        if not self.p["archive_dir"]:
+            self.get_logger().warning("ground: no archive_dir parameter; nothing to analyse")
+            return False, "no archive_dir parameter: nothing to analyse"
+        with self._lock:
+            if self.busy:
+                return False, "an analysis is already running"
+            self.busy = True
+        threading.Thread(target=self._work, daemon=True).start()
+        return True, f"analysis of {self.p['archive_dir']} started (results on {ru.TOPIC_GROUND_REPORT})"
+
+    def _on_analyse(self, request, response):
+        response.success, response.message = self.start()
+        return response
+
+    def _work(self):
+        t0 = time.time()
         try:
-            new, rep = recalibrate(healthy_all, params)
-            update["params"] = {k: v for k, v in new.to_dict().items() if k not in ("mu_g", "K_out", "notes")}
-            report["recalibration"] = rep
-            params = new
-        except ValueError as e:
-            report["recalibration"] = {"skipped": str(e)}
-    for act, missions in arch.items():
-        ref = missions[:healthy_missions]
-        cal = calibrate_actuator(ref, params, config, model_dir or None, log=log)
-        update["thresholds"][act] = cal["thresholds"]
-        if cal["references"]:
-            update["references"][act] = cal["references"]
-        report["actuators"][act] = {"missions": [int(m.meta.mission_index) for m in missions],
-                                    "reference": [int(m.meta.mission_index) for m in ref],
-                                    "reference_summary": [mission_summary(r) for r in cal["results"]],
-                                    "thresholds": update["thresholds"][act],
-                                    "references": cal["references"],
-                                    "missing_references": sorted({"stiffness", "friction"} - set(cal["references"]))}
-    return update, report
+            upd, rep = analyse_archive(self.p["archive_dir"], int(self.p["healthy_missions"]), bool(self.p["recalibrate"]),
+                                       log=lambda s: self.get_logger().warning(s), model_dir=self.p["model_dir"])
+            if self.p["store_dir"]:  # the same store `hdphm ground fleet` writes and `hdphm fleet` reads
+                rep["fleet"] = self._fleet()
+            rep["wall_s"] = time.time() - t0
+            self.result = (upd, rep)
+        except Exception as e:  # noqa: BLE001 - report, never crash the stack
+            self.error = f"{type(e).__name__}: {e}"
+            self.get_logger().error(f"ground analysis failed: {self.error}")
+        finally:
+            self.busy = False
+
+    def _fleet(self) -> dict:
+        from hd_ground.fleet.run import fleet_status, run_fleet
+        from hd_ground.fleet.tasks import FleetOptions
+
+        s = run_fleet([self.p["archive_dir"]], self.p["store_dir"], self.p["fleet_scheduler"],
+                      FleetOptions(healthy_missions=int(self.p["healthy_missions"]), model_dir=self.p["model_dir"]),
+                      progress=False, log=lambda s: self.get_logger().info(s))
+        return {"summary": s, "status": fleet_status(self.p["store_dir"])}
+
+    def _deliver(self):
+        if self.result is None:
+            return
+        upd, rep = self.result
+        self.result = None
+        self.pub_update.publish(ru.json_msg(upd))
+        self.pub_report.publish(ru.json_msg(rep))
+        self.n_runs += 1
+        self.get_logger().info(f"ground: pushed thresholds for {len(upd['thresholds'])} actuator(s), monitor references "
+                               f"for {len(upd.get('references', {}))}"
+                               + (" and recalibrated parameters" if "params" in upd else ""))
 
 
 def make_node(context=None, overrides: dict[str, Any] | None = None, param_services: bool = True,
-              autostart: bool = True):
-    from rclpy.parameter import Parameter
-    from std_msgs.msg import String
-    from std_srvs.srv import Trigger
-
-    from hd_onboard.node import declare
-
-    from hdphm.managed import ManagedNode, bring_up
-
-    class GroundNode(ManagedNode):
-        def __init__(self):
-            po = [Parameter(k, value=v) for k, v in (overrides or {}).items()]
-            super().__init__(NODE_NAME, context=context, parameter_overrides=po,
-                             start_parameter_services=param_services)
-            self.p = declare(self, PARAMS)
-            self.n_runs = 0
-
-        def configure(self):
-            self.pub_update = self.create_publisher(String, ru.TOPIC_TWIN_UPDATE, ru.qos("latched"))
-            self.pub_report = self.create_publisher(String, ru.TOPIC_GROUND_REPORT, ru.qos("latched"))
-            self.create_subscription(String, TOPIC_TRIGGER, lambda m: self.start(), ru.qos("stream"))
-            self.create_service(Trigger, SERVICE_ANALYSE, self._on_analyse)
-            self.result: tuple[dict, dict] | None = None
-            self.error: str | None = None
-            self.busy = False
-            self._lock = threading.Lock()
-            self.create_timer(0.2, self._deliver)
-            ru.contain_callbacks(self, "hdphm/ground")  # no exception of a callback stops the node
-
-        def activate(self):
-            if self.p["run_on_start"] and self.p["archive_dir"]:
-                self.start()
-
-        def start(self) -> tuple[bool, str]:
-            if not self.p["archive_dir"]:
-                self.get_logger().warning("ground: no archive_dir parameter; nothing to analyse")
-                return False, "no archive_dir parameter: nothing to analyse"
-            with self._lock:
-                if self.busy:
-                    return False, "an analysis is already running"
-                self.busy = True
-            threading.Thread(target=self._work, daemon=True).start()
-            return True, f"analysis of {self.p['archive_dir']} started (results on {ru.TOPIC_GROUND_REPORT})"
-
-        def _on_analyse(self, request, response):
-            response.success, response.message = self.start()
-            return response
-
-        def _work(self):
-            t0 = time.time()
-            try:
-                upd, rep = analyse_archive(self.p["archive_dir"], int(self.p["healthy_missions"]), bool(self.p["recalibrate"]),
-                                           log=lambda s: self.get_logger().warning(s), model_dir=self.p["model_dir"])
-                if self.p["store_dir"]:  # the same store `hdphm ground fleet` writes and `hdphm fleet` reads
-                    from hd_ground.fleet.run import fleet_status, run_fleet
-                    from hd_ground.fleet.tasks import FleetOptions
-
-                    s = run_fleet([self.p["archive_dir"]], self.p["store_dir"], self.p["fleet_scheduler"],
-                                  FleetOptions(healthy_missions=int(self.p["healthy_missions"]),
-                                               model_dir=self.p["model_dir"]), progress=False,
-                                  log=lambda s: self.get_logger().info(s))
-                    rep["fleet"] = {"summary": s, "status": fleet_status(self.p["store_dir"])}
-                rep["wall_s"] = time.time() - t0
-                self.result = (upd, rep)
-            except Exception as e:  # noqa: BLE001 - report, never crash the stack
-                self.error = f"{type(e).__name__}: {e}"
-                self.get_logger().error(f"ground analysis failed: {self.error}")
-            finally:
-                self.busy = False
-
-        def _deliver(self):
-            if self.result is None:
-                return
-            upd, rep = self.result
-            self.result = None
-            self.pub_update.publish(ru.json_msg(upd))
-            self.pub_report.publish(ru.json_msg(rep))
-            self.n_runs += 1
-            self.get_logger().info(f"ground: pushed thresholds for {len(upd['thresholds'])} actuator(s), monitor references "
-                                   f"for {len(upd.get('references', {}))}"
-                                   + (" and recalibrated parameters" if "params" in upd else ""))
-
-    return bring_up(GroundNode(), autostart)
+              autostart: bool = True) -> GroundNode:
+    """The ground node (managed; configured and activated unless ``autostart`` is False)."""
+    return bring_up(GroundNode(context, overrides, param_services), autostart)

@@ -49,10 +49,6 @@ from hd_onboard.warmup import WarmUp
 from hd_onboard.windows import WindowJob, Windows, window_row
 from hd_twin import physics as ph
 
-# Transition re-export: hd_onboard.node imports CHANNELS (with OnboardConfig, RESIDUAL_COLUMNS and window_row,
-# used here anyway) from this module; delete once the node shell imports from hd_onboard.residuals (issue 16).
-from hd_onboard.residuals import CHANNELS  # noqa: F401
-
 
 @dataclass
 class PushResult:

@@ -12,7 +12,8 @@ threshold modes:
 * ground (``--ground K``): per actuator, the lines and the stiffness / friction
   monitor references come from its first K missions
   (``hd_ground.references.calibrate_actuator``, as the ground node computes
-  them) and only the **other** missions are scored (never the calibration
+  them; passed in as ``calibrate=`` by the caller, ``hdphm onboard eval``, so this
+  module never imports the ground) and only the **other** missions are scored (never the calibration
   data). ``skip=K`` with self-calibration scores the same missions, for a
   like-for-like comparison.
 
@@ -90,20 +91,24 @@ def not_scored_reason(m, cfg: OnboardConfig) -> str:
 
 def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None = None,
                       config: OnboardConfig | None = None, labels: Sequence[str] | None = None,
-                      references: bool = True, skip: int = 0) -> dict[str, Any]:
+                      references: bool = True, skip: int = 0, calibrate: Callable | None = None) -> dict[str, Any]:
     """Score healthy :class:`hd_bag.mission.Mission` objects (see module docstring); returns the summary dict.
 
     ``ground`` K > 0: per actuator, calibrate on its first K missions and score the others; ``references``
     False gives the ground's lines only (monitor references from each warm-up, the former mode).
     ``skip`` (self-calibration only): leave each actuator's first ``skip`` missions unscored.
+    ``calibrate(missions, config=, model_dir=)`` -> ``{"thresholds", "references"}``: the ground's per-actuator
+    calibration (``hd_ground.references.calibrate_actuator``; needed when ``ground`` > 0).
     """
-    from hd_ground.references import calibrate_actuator
     from hd_onboard.detectors.ewma import ChannelThreshold
     from hd_onboard.expected import make_expected
     from hd_twin import physics as ph
 
     if ground < 0 or ground > 10**5 or skip < 0 or skip > 10**5:
         raise ValueError(f"ground = {ground}, skip = {skip}: numbers of missions per actuator must be in 0..1e5")
+    if ground and calibrate is None:
+        raise ValueError("ground = %d needs calibrate= (the ground's calibration, "
+                         "hd_ground.references.calibrate_actuator)" % ground)
     labels = list(labels) if labels is not None else [f"mission {i}" for i in range(len(missions))]
     cfg = (config or OnboardConfig()).validate()
     by_act: dict[str, list[int]] = {}
@@ -128,7 +133,7 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
             ref = idx[:ground]
             if len(idx) <= ground:
                 raise ValueError(f"actuator {act}: {len(idx)} mission(s), need more than --ground {ground} to score any")
-            cal = calibrate_actuator([missions[i] for i in ref], config=cfg, model_dir=model_dir)
+            cal = calibrate([missions[i] for i in ref], config=cfg, model_dir=model_dir)
             th = {c: ChannelThreshold.from_dict(v, f"ground thresholds of {act}") for c, v in cal["thresholds"].items()}
             refs = cal["references"] if references else None
             calib[act] = {"missions": [labels[i] for i in ref], "thresholds": cal["thresholds"],
@@ -177,7 +182,7 @@ def evaluate_missions(missions: Sequence, ground: int = 0, model_dir: str | None
 
 def evaluate_bags(paths: Iterable[str | os.PathLike], ground: int = 0, model_dir: str | None = None,
                   config: OnboardConfig | None = None, progress: bool = False, references: bool = True,
-                  skip: int = 0) -> dict[str, Any]:
+                  skip: int = 0, calibrate: Callable | None = None) -> dict[str, Any]:
     """:func:`evaluate_missions` on bags (files or directories); unreadable bags are listed, not fatal."""
     from hd_bag import read_mission
 
@@ -198,7 +203,7 @@ def evaluate_bags(paths: Iterable[str | os.PathLike], ground: int = 0, model_dir
             bad.append(str(e))
     if not ms:
         raise ValueError("no readable bag: " + "; ".join(bad[:5]))
-    s = evaluate_missions(ms, ground, model_dir, config, labels, references=references, skip=skip)
+    s = evaluate_missions(ms, ground, model_dir, config, labels, references=references, skip=skip, calibrate=calibrate)
     s["unreadable"] = bad
     return s
 
@@ -226,11 +231,13 @@ def plot_summary(s: dict, path: str | os.PathLike) -> None:
     plt.close(fig)
 
 
-def cmd_eval(args) -> int:
+def cmd_eval(args, calibrate: Callable | None = None) -> int:
+    """``hdphm onboard eval``; ``calibrate``: as in :func:`evaluate_missions` (the CLI passes the ground's)."""
     import sys
 
     try:
-        s = evaluate_bags(args.paths, ground=args.ground, model_dir=args.model_dir or None, progress=not args.quiet)
+        s = evaluate_bags(args.paths, ground=args.ground, model_dir=args.model_dir or None, progress=not args.quiet,
+                          calibrate=calibrate)
     except ValueError as e:
         print(f"hdphm onboard eval: {e}", file=sys.stderr)
         return 2
@@ -304,24 +311,23 @@ GROUND_SEED_OFFSET = 1000
 
 
 def study_calibration(ground: int, actuator: int = 2, pop_seed: int = 7, seed0: int = 40, duration: float = 16.0,
-                      config: OnboardConfig | None = None, *, simulate: Callable) -> dict[str, Any]:
+                      config: OnboardConfig | None = None, *, simulate: Callable, calibrate: Callable) -> dict[str, Any]:
     """Ground calibration of the study's unit: ``ground`` healthy missions of the same unit (seeds
     ``seed0 + GROUND_SEED_OFFSET + j``, never a fault mission's), through
     :func:`hd_ground.references.calibrate_actuator`; returns its ``thresholds`` and ``references``.
     ``simulate(actuator, pop_seed, seed, duration, mission_index, fault)`` makes a mission (the
     scoring harness passes the plant's, :func:`hdphm.onboard_study.sim_mission`: estimators never
-    import the simulator)."""
-    from hd_ground.references import calibrate_actuator
-
+    import the simulator); ``calibrate``: the ground's calibration, as in :func:`evaluate_missions`."""
     ms = [simulate(actuator, pop_seed, seed0 + GROUND_SEED_OFFSET + j, duration, j) for j in range(ground)]
-    cal = calibrate_actuator(ms, config=config)
+    cal = calibrate(ms, config=config)
     return {"seeds": [seed0 + GROUND_SEED_OFFSET + j for j in range(ground)], "thresholds": cal["thresholds"],
             "references": cal["references"]}
 
 
 def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed: int = 7, seed0: int = 40,
                     duration: float = 16.0, config: OnboardConfig | None = None, progress: bool = False,
-                    ground: int = 0, missions: dict | None = None, *, simulate: Callable) -> dict[str, Any]:
+                    ground: int = 0, missions: dict | None = None, *, simulate: Callable,
+                    calibrate: Callable | None = None) -> dict[str, Any]:
     """Detection delay of the onboard core (physics stand-in) on simulated faults.
 
     Mission ``k`` of a case: unit ``actuator`` of the ``pop_seed`` population, seed ``seed0 + k``,
@@ -333,7 +339,8 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
     (delay not scored). ``missions``: a dict reused across calls (simulated fault missions cached by
     case and seed, so both modes score the same missions). Returns per case the rows ``(seed, onset,
     first flag [s] or None, delay [s] or None, reasons, first crossing per source)`` and a summary
-    (detected, missed, early, median / max delay). ``simulate``: as in :func:`study_calibration`.
+    (detected, missed, early, median / max delay). ``simulate``, ``calibrate`` (needed when ``ground`` > 0):
+    as in :func:`study_calibration`.
     """
     from hd_onboard.detectors.ewma import ChannelThreshold
 
@@ -341,7 +348,9 @@ def detection_study(cases=DEFAULT_CASES, n: int = 6, actuator: int = 2, pop_seed
     cache = missions if missions is not None else {}
     cal = None
     if ground:
-        cal = study_calibration(ground, actuator, pop_seed, seed0, duration, cfg, simulate=simulate)
+        if calibrate is None:
+            raise ValueError(f"ground = {ground} needs calibrate= (hd_ground.references.calibrate_actuator)")
+        cal = study_calibration(ground, actuator, pop_seed, seed0, duration, cfg, simulate=simulate, calibrate=calibrate)
         th = {c: ChannelThreshold.from_dict(v, "study ground thresholds") for c, v in cal["thresholds"].items()}
     out = []
     it = [(c, k) for c in cases for k in range(n)]
@@ -441,9 +450,10 @@ def study_table(study: dict, fa: dict | None = None) -> str:
     return "\n".join(lines)
 
 
-def run_study(a, simulate: Callable) -> int:
+def run_study(a, simulate: Callable, calibrate: Callable | None = None) -> int:
     """Run the study for parsed :func:`add_study_args` options; print the table, write JSON + PNG.
-    ``simulate``: as in :func:`study_calibration` (``hdphm onboard study`` passes the plant's)."""
+    ``simulate``, ``calibrate``: as in :func:`study_calibration` (``hdphm onboard study`` passes the plant's
+    and the ground's)."""
     import sys
 
     kw = {}
@@ -466,9 +476,10 @@ def run_study(a, simulate: Callable) -> int:
                              missions=cache, simulate=simulate)
         fa_g = st_g = None
         if ground:
-            fa_g = evaluate_bags(a.healthy, ground=ground, config=cfg, progress=True) if a.healthy else None
+            fa_g = (evaluate_bags(a.healthy, ground=ground, config=cfg, progress=True, calibrate=calibrate)
+                    if a.healthy else None)
             st_g = detection_study(n=a.n, actuator=a.actuator, pop_seed=a.pop_seed, seed0=a.seed0, config=cfg,
-                                   progress=True, ground=ground, missions=cache, simulate=simulate)
+                                   progress=True, ground=ground, missions=cache, simulate=simulate, calibrate=calibrate)
     except ValueError as e:
         print(f"onboard study: {e}", file=sys.stderr)
         return 2

@@ -351,6 +351,24 @@ def onboard_window_features(mission, window_s: float = OBS_WINDOW_S, cfg: Featur
     return out
 
 
+def window_feature_fn(meta: dict, gear_ratio: float):
+    """The onboard node's window feature function ``fn(stamps_s, V, temperature) -> {name: number}``:
+    :func:`block_features` of one closed window of the onboard core (``V`` columns theta_m, theta_f,
+    omega_m, omega_f, tau_m, Q_red; time relative to the window's first stamp; torque constant from the
+    mission metadata, 0.3 N*m/A when absent), as :func:`onboard_window_features` computes in batch."""
+    k_t = float(meta.get("torque_constant") or 0.3)
+    N = float(gear_ratio)
+
+    def fn(stamps_s, V, temperature):
+        t = stamps_s - stamps_s[0]
+        temp = np.full(len(t), temperature) if np.isfinite(temperature) else None
+        f = block_features(t, V[:, 0], V[:, 1], V[:, 2], V[:, 3], V[:, 4], V[:, 5], N, k_t,
+                           temp, None, None, "onboard window")
+        return {k: v for k, v in f.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+
+    return fn
+
+
 def mission_observation(windows) -> dict:
     """The per-mission prognostic observation from its window feature rows (node and batch alike).
 

@@ -40,7 +40,7 @@ def _write_history(out: Path, hist, stem: str = "rul_history") -> None:
 def _prognose(args) -> int:
     if args.model:
         return _prognose_life(args)
-    from hd_prognostic.hd import DEFAULT_OBS_MODEL, build_model, extract_actuator, prognose
+    from hd_prognostic.pipeline import DEFAULT_OBS_MODEL, build_model, extract_actuator, prognose
     from hd_prognostic.observation import ObservationModel
     from hd_prognostic.plots import save_snapshot, save_state_history
 
@@ -92,7 +92,7 @@ def _metrics(args) -> int:
     try:
         eol = float(args.truth)
     except ValueError:
-        from hd_prognostic.hd import extract_actuator
+        from hd_prognostic.pipeline import extract_actuator
 
         a = extract_actuator(args.truth, include_truth=True)
         eol = a.eol_mission()
@@ -113,7 +113,7 @@ def _metrics(args) -> int:
 
 def _eval(args) -> int:
     from hd_prognostic.evaluate import fleet_eval, load_fleet
-    from hd_prognostic.hd import JOINT
+    from hd_prognostic.pipeline import JOINT
 
     out = Path(args.out)
     fleet = load_fleet(args.fleet_dir, cache_dir=out / "cache", workers=args.workers)
@@ -159,7 +159,7 @@ def _features(args) -> int:
 
 def _fit_obs(args) -> int:
     from hd_prognostic.evaluate import load_fleet
-    from hd_prognostic.hd import JOINT, fit_population
+    from hd_prognostic.pipeline import JOINT, fit_population
 
     fleet = load_fleet(args.fleet_dir, cache_dir=args.cache, workers=args.workers)
     kw = {k: v for k, v in JOINT.items() if k != "pf_options"} if args.joint else {"baseline": args.baseline}
@@ -255,7 +255,7 @@ def _life_sources(src: str, events: str | None, feature: str, exposure: str, cac
         notes += attach_events(units, ev, str(events))
         name = "csv exposure" if exposure in ("auto", "csv") else exposure
         return {name: units}, "hi", "step", notes
-    from hd_prognostic.hd import load_fleet_histories, unit_history
+    from hd_prognostic.pipeline import load_fleet_histories, unit_history
 
     names = list(EXPOSURES) if exposure == "auto" else [exposure]
     acts, _ = load_fleet_histories(p, feature, "missions", cache_dir=cache, workers=workers, progress=progress)
@@ -313,7 +313,7 @@ def _prognose_life(args) -> int:
             raise ValueError(f"{src}: {len(units)} units in the file; choose one with --unit")
         u = units[0]
     else:
-        from hd_prognostic.hd import extract_actuator, unit_history
+        from hd_prognostic.pipeline import extract_actuator, unit_history
 
         if model.exposure not in ("missions", "hours", "load"):
             raise ValueError(f"{args.model}: fitted on CSV exposure ({model.exposure}); give a CSV file")

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from hd_prognostic import metrics as M
-from hd_prognostic.hd import ActuatorData, build_model, extract_actuator, find_actuator_dirs, fit_population, mission_sequence, prognose
+from hd_prognostic.pipeline import ActuatorData, build_model, extract_actuator, find_actuator_dirs, fit_population, mission_sequence, prognose
 from hd_prognostic.observation import ObservationModel
 from hd_prognostic.rul import rul_distribution
 

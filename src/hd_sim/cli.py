@@ -176,7 +176,10 @@ def register(subparsers) -> None:
     pfam.set_defaults(func=_family)
 
 
-if __name__ == "__main__":  # pragma: no cover
-    from hdphm.cli import main
+if __name__ == "__main__":  # pragma: no cover - `python -m hd_sim.cli ARGS` = `hdphm sim ARGS` (no import of hdphm)
+    import argparse
 
-    sys.exit(main(["sim", *sys.argv[1:]]))
+    _ap = argparse.ArgumentParser(prog="python -m hd_sim.cli")
+    register(_ap.add_subparsers(dest="command"))
+    _a = _ap.parse_args(["sim", *sys.argv[1:]])
+    sys.exit(int(_a.func(_a) or 0))

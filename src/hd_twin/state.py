@@ -16,8 +16,10 @@ a node, poison the state, or grow memory):
   (symbolic links resolved), never any path a graph participant names.
 
 A refusal is a ``ValueError`` whose message starts with the field path (``params.N: ...``).
-Semantic checks that need the onboard detector's classes (threshold and reference ``from_dict``)
-stay in ``hd_twin.node`` (layering: hd_twin does not import hd_onboard).
+The semantic checks of the per-actuator records (threshold and reference ``from_dict``,
+:mod:`hd_twin.records`) run in :func:`parse_thresholds` / :func:`parse_references`; the state itself
+is built and merged here too (:func:`initial_state`, :func:`apply_update`, :func:`read_state` for a
+consumer), so the twin node and the onboard node only convert messages.
 """
 
 from __future__ import annotations
@@ -25,10 +27,10 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
+import time
 from typing import Any, Iterable
 
-import numpy as np
+from hd_bag.jsonsafe import json_depth, parse_json_object  # noqa: F401 - json_depth re-exported
 
 #: An update carries parameters, thresholds and references of some actuators: a few KiB. 1 MiB
 #: holds thresholds for thousands of actuators.
@@ -45,8 +47,6 @@ MAX_PATH = 4096
 KNOWN_KEYS = ("params", "thresholds", "references", "normalisation", "effects", "degradation_law", "model_dir",
               "model_version", "updated_by")
 
-_STRING_RE = re.compile(r'"(?:[^"\\]|\\.)*"', re.S)
-
 
 class UpdateError(ValueError):
     """A refused update or state: ``field`` is the dotted path of the offending field."""
@@ -56,38 +56,13 @@ class UpdateError(ValueError):
         super().__init__(f"{field}: {problem}" if field else problem)
 
 
-def json_depth(text: str) -> int:
-    """Deepest bracket nesting of a JSON text (strings skipped), without recursion."""
-    stripped = _STRING_RE.sub("", text)
-    a = np.frombuffer(stripped.encode("utf-8", "replace"), np.uint8)
-    if a.size == 0:
-        return 0
-    step = ((a == ord("{")) | (a == ord("["))).astype(np.int32) - ((a == ord("}")) | (a == ord("]"))).astype(np.int32)
-    return int(np.cumsum(step).max())
-
-
-def _no_constant(name: str):
-    raise ValueError(f"{name} is not a finite number (NaN/Infinity are not allowed)")
-
-
 def parse_json(text: Any, what: str, max_bytes: int = MAX_UPDATE_BYTES, max_depth: int = MAX_JSON_DEPTH) -> dict:
-    """A JSON object from ``text`` within the size and depth caps; ValueError naming ``what`` otherwise."""
-    if not isinstance(text, str):
-        raise UpdateError("", f"{what}: expected JSON text, got {type(text).__name__}")
-    if len(text) > max_bytes or len(text.encode("utf-8", "replace")) > max_bytes:
-        raise UpdateError("", f"{what}: {len(text)} characters, above the cap of {max_bytes} bytes")
-    d = json_depth(text)
-    if d > max_depth:
-        raise UpdateError("", f"{what}: JSON nested {d} deep, above the cap of {max_depth}")
+    """A JSON object from ``text`` within the size and depth caps (:func:`hd_bag.jsonsafe.parse_json_object`);
+    :class:`UpdateError` naming ``what`` otherwise."""
     try:
-        obj = json.loads(text, parse_constant=_no_constant)
-    except RecursionError:
-        raise UpdateError("", f"{what}: JSON nested too deep") from None
-    except ValueError as e:  # JSONDecodeError is a ValueError; so is _no_constant's
-        raise UpdateError("", f"{what}: not valid JSON ({e})") from None
-    if not isinstance(obj, dict):
-        raise UpdateError("", f"{what}: expected a JSON object, got {type(obj).__name__}")
-    return obj
+        return parse_json_object(text, what, max_bytes, max_depth)
+    except ValueError as e:
+        raise UpdateError("", str(e)) from None
 
 
 # ---- generic checks ----------------------------------------------------------------------------------
@@ -247,6 +222,9 @@ def model_roots(configured: str | Iterable[str] = "", initial_model_dir: str = "
     return out
 
 
+_roots = model_roots  # apply_update's parameter of that name shadows the function
+
+
 def check_model_dir(v: Any, roots: list[str], field: str = "model_dir") -> str:
     s = text(v, field, MAX_PATH)
     if s == "":
@@ -335,6 +313,145 @@ def summary_of_refusal(e: Exception, data: str, wall_time: float) -> dict:
             "field": getattr(e, "field", ""), "problem": str(e)[:200]}
 
 
+# ---- the per-actuator records (thresholds, monitor references) -----------------------------------
+def parse_thresholds(ths: Any, where: str, channels: Iterable[str] | None = None) -> dict[str, dict[str, Any]]:
+    """``{actuator: {channel: {...}}}`` -> ``{actuator: {channel: ChannelThreshold}}`` (validated; ValueError
+    naming ``where``, the actuator and the channel). ``channels``: keep only these (the onboard core's)."""
+    from hd_twin.records import ChannelThreshold
+
+    if not isinstance(ths, dict):
+        raise ValueError(f"{where}: thresholds must be a mapping actuator -> channel -> values")
+    keep = None if channels is None else set(channels)
+    out: dict[str, dict[str, Any]] = {}
+    for act, chans in ths.items():
+        if not isinstance(chans, dict):
+            raise ValueError(f"{where}: thresholds[{act}] must be a mapping channel -> values")
+        out[act] = {c: ChannelThreshold.from_dict(v, f"{where} thresholds[{act}][{c}]")
+                    for c, v in chans.items() if keep is None or c in keep}
+    return out
+
+
+def parse_references(refs: Any, where: str = "update") -> dict[str, dict[str, Any]]:
+    """``{actuator: {"stiffness": {...}, "friction": {...}}}`` (either monitor may be absent) ->
+    ``{actuator: {"stiffness": StiffnessReference, "friction": FrictionReference}}``, checked entry by
+    entry; ValueError naming ``where``, the actuator and the monitor. Used by the twin core (merging an
+    update) and the onboard node (applying the state)."""
+    from hd_twin.records import FrictionReference, StiffnessReference
+
+    if not isinstance(refs, dict):
+        raise ValueError(f"{where}: references must be a mapping actuator -> monitor -> values")
+    out: dict[str, dict[str, Any]] = {}
+    for act, mons in refs.items():
+        if not isinstance(mons, dict):
+            raise ValueError(f"{where}: references[{act}] must be a mapping monitor -> values")
+        bad = set(mons) - {"stiffness", "friction"}
+        if bad:
+            raise ValueError(f"{where}: references[{act}]: unknown monitor(s) {sorted(bad)}; known: friction, stiffness")
+        o: dict[str, Any] = {}
+        if "stiffness" in mons:
+            o["stiffness"] = StiffnessReference.from_dict(mons["stiffness"], f"{where} references[{act}][stiffness]")
+        if "friction" in mons:
+            o["friction"] = FrictionReference.from_dict(mons["friction"], f"{where} references[{act}][friction]")
+        out[str(act)] = o
+    return out
+
+
+# ---- the twin state: initial, merged with an update, read by a consumer ----------------------------
+def initial_state(model_dir: str = "", params_file: str = "") -> dict:
+    """The twin state at start: parameters from the model's config.json, a params file, or the defaults."""
+    from hd_twin import physics as ph
+
+    state: dict[str, Any] = {"revision": 0, "model_dir": model_dir, "model_version": "physics-standin",
+                             "effects": list(ph.DEFAULT_EFFECTS), "degradation_law": {"name": "archard"},
+                             "thresholds": {}, "references": {}, "normalisation": {}, "updated_by": "init", "history": []}
+    params = ph.TwinParams.from_yaml(params_file or None)
+    if model_dir:
+        from pathlib import Path
+
+        from hd_twin.modeldir import CONFIG_NAME, read_config
+
+        cfgp = Path(model_dir) / CONFIG_NAME
+        cfg = read_config(model_dir)
+        if isinstance(cfg.get("params"), dict) and not params_file:
+            params = ph.TwinParams.from_dict({k: v for k, v in cfg["params"].items() if k in ph.TwinParams.__dataclass_fields__ or k in ("mu_g", "K_out")}, str(cfgp))
+        state["model_version"] = str(cfg.get("version") or cfg.get("model_version") or Path(model_dir).name)
+        state["effects"] = list(cfg.get("effects", state["effects"]))
+        state["normalisation"] = cfg.get("normalization", {})
+    state["params"] = params.to_dict()
+    return state
+
+
+def apply_update(state: dict, upd: dict, source: str = "update", model_roots: list[str] | None = None) -> dict:
+    """New state = ``state`` with ``upd`` merged, validated; raises ValueError naming the bad field.
+
+    ``model_roots``: directories a new ``model_dir`` may lie in (None: those of
+    :func:`model_roots` for the state's current ``model_dir``)."""
+    from hd_twin import physics as ph
+
+    if model_roots is None:
+        model_roots = _roots("", state.get("model_dir", ""))
+    try:
+        upd = check_update(upd, model_roots, source)
+    except UpdateError as e:
+        raise refusal(source, e) from None
+    new = json.loads(json.dumps(state))
+    if "params" in upd:
+        if not isinstance(upd["params"], dict):
+            raise ValueError(f"{source}: params must be a mapping")
+        merged = {k: v for k, v in new["params"].items() if k not in ("mu_g", "K_out")}
+        merged.update({k: v for k, v in upd["params"].items() if k not in ("mu_g", "K_out")})
+        new["params"] = ph.TwinParams.from_dict(merged, where=f"{source} params").to_dict()
+        try:
+            check_merged_params(new["params"])
+        except UpdateError as e:
+            raise refusal(source, e) from None
+    if "thresholds" in upd:
+        for act, chans in parse_thresholds(upd["thresholds"], source).items():
+            new["thresholds"].setdefault(act, {}).update({c: t.to_dict() for c, t in chans.items()})
+    if "references" in upd:
+        new.setdefault("references", {})
+        for act, refs in parse_references(upd["references"], source).items():
+            new["references"].setdefault(act, {}).update({m: r.to_dict() for m, r in refs.items()})
+    if "effects" in upd:
+        new["effects"] = ph.check_effects(upd["effects"])
+    for k in ("normalisation", "degradation_law"):
+        if k in upd:
+            if not isinstance(upd[k], dict):
+                raise ValueError(f"{source}: {k} must be a mapping")
+            new[k] = upd[k]
+    for k in ("model_dir", "model_version"):
+        if k in upd:
+            new[k] = str(upd[k])
+    new["revision"] = int(state.get("revision", 0)) + 1
+    new["updated_by"] = str(upd.get("updated_by", source))[:MAX_TEXT]
+    size = len(json.dumps(new))
+    if size > MAX_STATE_BYTES // 2:  # merged thresholds/references grow per actuator: bound the whole state
+        raise ValueError(f"{source}: the state would grow to {size} bytes, above the cap of {MAX_STATE_BYTES // 2} "
+                         "(hd_twin.state.MAX_STATE_BYTES / 2)")
+    new["history"] = (state.get("history", []) + [{"revision": new["revision"], "by": new["updated_by"], "keys": sorted(upd),
+                                                     "wall_time": time.time()}])[-20:]
+    return new
+
+
+def read_state(text: Any, where: str, roots: list[str], default_params, channels: Iterable[str] | None = None):
+    """A published twin state as a consumer (the onboard node) applies it: ``(state, params, thresholds,
+    references)`` with params a ``TwinParams`` (``default_params`` when the state has none), thresholds
+    ``{actuator: {channel: ChannelThreshold}}`` (``channels`` only) and references as
+    :func:`parse_references`. ``model_dir`` must lie inside ``roots`` (an ONNX file is loaded from it).
+    ValueError naming ``where`` and the field otherwise."""
+    from hd_twin import physics as ph
+
+    st = parse_json(text, where, MAX_STATE_BYTES)
+    if st.get("model_dir"):
+        check_model_dir(st["model_dir"], roots, f"{where} model_dir")
+    for k in ("thresholds", "references"):
+        if st.get(k) is not None:
+            check_per_actuator(st[k], f"{where} {k}")
+    params = ph.TwinParams.from_dict(st.get("params", {}), where=where) if st.get("params") else default_params
+    return (st, params, parse_thresholds(st.get("thresholds") or {}, where, channels),
+            parse_references(st.get("references") or {}, where))
+
+
 __all__ = ["MAX_UPDATE_BYTES", "MAX_STATE_BYTES", "MAX_JSON_DEPTH", "UpdateError", "parse_json", "json_depth",
            "check_update", "check_params", "check_merged_params", "check_model_dir", "model_roots",
-           "summary_of_refusal"]
+           "summary_of_refusal", "parse_thresholds", "parse_references", "initial_state", "apply_update", "read_state"]

@@ -23,9 +23,10 @@ def sim_mission(actuator: int, pop_seed: int, seed: int, duration: float, missio
 
 def run_study(args) -> int:
     """``hdphm onboard study``: the study of :mod:`hd_onboard.evaluate` on simulated missions."""
+    from hd_ground.references import calibrate_actuator
     from hd_onboard.evaluate import run_study as run
 
-    return run(args, simulate=sim_mission)
+    return run(args, simulate=sim_mission, calibrate=calibrate_actuator)
 
 
 def main(argv=None) -> int:

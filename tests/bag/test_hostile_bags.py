@@ -234,7 +234,7 @@ def test_flipped_metadata_map_length_is_a_clean_error(tmp_path, mission):
     with pytest.raises(McapFormatError, match="corrupt metadata record at byte"):
         read_metadata(p2)
     assert errors(validate_bag(p2))
-    from hdphm.ros_cli import BagSource
+    from hd_ros.replay import BagSource
 
     with pytest.raises(ValueError, match="md.mcap"):
         for _ in BagSource(p2).blocks():

@@ -1,9 +1,15 @@
 """Discovery on plants we did not build it around: hd_sim structural families and the independent plant2.
 
 For one hidden effect per world, ``hdphm discover``'s core must name it and leave a held-out error no higher
-(within 2 %) than the plain greedy least-squares reference (``hd_ground.discovery.greedy``: what an engineer writes in an
+than the plain greedy least-squares reference (``hd_ground.discovery.greedy``: what an engineer writes in an
 afternoon, scored on the same held-out bag it selects on) in the same run; on clean data it must report
-nothing that explains >= 5 % of the held-out residual. Bags come from the session fixtures (short missions,
+nothing that explains >= 5 % of the held-out residual on any signal (a finding that is the world's own
+torsion law on Q_red, e.g. the Bouc-Wen loop of hysteretic-robot, is not an undeclared effect).
+
+Not asserted, because it does not hold (README, "Discovery on plants it was not built around"): clean
+deadzone-lugre, where an omega_m |omega_m| term explains ~11 % of the held-out residual once the LuGre
+pre-sliding transition is modelled (greedy finds it too; the simulator's steady-state motor-torque curve
+is not Coulomb + linear viscous there). Bags come from the session fixtures (short missions,
 built once); the evaluation is ``bench/bench_discover.py``'s (``hdphm bench discover`` prints the same rows
 for every catalog effect on every family).
 """
@@ -20,8 +26,9 @@ _spec.loader.exec_module(bd)
 
 #: (world, hidden effect): one per world (hdphm bench discover prints every catalog effect on every family)
 CASES = [
+    ("default", "stribeck_friction"),
     ("smooth-cubic", "position_periodic_torque"),
-    ("deadzone-lugre", "kinematic_error_harmonic"),
+    ("deadzone-lugre", "stribeck_friction"),  # LuGre pre-sliding friction: needs the identified transition law
     ("hysteretic-robot", "stribeck_friction"),
     ("plant2", "load_friction"),
 ]
@@ -58,12 +65,17 @@ def test_hidden_effect_named_and_no_worse_than_greedy(world, effect, family_bags
     r = _case(world, effect, family_bags, plant2_case_bags, tmp_path)
     assert r["found_right"], (r["found"], r["expect"])
     assert r["after"] < r["before"]
-    # no higher than the greedy reference's; 2 % allowance: the reference picks its terms on the very held-out
-    # bag it is scored on (as the afternoon script does), which buys it about 1 % at the noise floor
-    assert r["after"] <= r["greedy_after"] * 1.02, (r["after"], r["greedy_after"])
+    # no higher than the greedy reference's, although the reference picks its terms on the very held-out bag
+    # it is scored on (as the afternoon script does): lower, or higher by less than the held-out bag's own
+    # sampling noise (discover's held-out MSE above greedy's by < 2 standard errors of the paired difference
+    # over 20 contiguous chunks: at the noise floor greedy's held-out-selected extra term buys it < 1 %)
+    z = r["paired_z"]
+    assert z is not None, "discover and greedy were not scored on the same held-out rows"
+    assert r["after"] <= r["greedy_after"] or z < 2.0, (r["after"], r["greedy_after"], z)
 
 
-@pytest.mark.parametrize("world", ["smooth-cubic", "plant2"])
+@pytest.mark.parametrize("world", ["default", "smooth-cubic", "hysteretic-robot", "plant2"])
 def test_clean_data_nothing_explains_5_percent(world, family_bags, plant2_case_bags, tmp_path):
-    r = _case(world, None, family_bags, plant2_case_bags, tmp_path, signals=["tau_m"])
+    # every signal (hysteretic-robot's Bouc-Wen twist used to leak into theta_m harmonics of Q_red)
+    r = _case(world, None, family_bags, plant2_case_bags, tmp_path, signals=["tau_m", "Q_red"])
     assert r["clean_max_explained"] < 0.05, r["found"]

@@ -14,7 +14,7 @@ from hd_onboard.core import OnboardCore  # noqa: E402
 from hd_onboard.detectors.ewma import ChannelThreshold  # noqa: E402
 from hd_onboard.detectors.friction import FrictionReference, fit_friction_reference  # noqa: E402
 from hd_onboard.detectors.stiffness import fit_stiffness_reference  # noqa: E402
-from hd_twin.node import apply_update, initial_state  # noqa: E402
+from hd_twin.state import apply_update, initial_state  # noqa: E402
 from tests.onboard.simfix import faulted_mission, sim_mission  # noqa: E402
 
 
@@ -129,7 +129,7 @@ def test_twin_state_carries_references(calibration):
     with pytest.raises(ValueError, match="unknown monitor"):
         apply_update(s2, {"references": {"EMA-0002": {"backlash": {}}}})
     # a state written before this field existed: the onboard parser takes it
-    from hd_onboard.node import _parse_references
+    from hd_twin.state import parse_references
 
-    assert _parse_references({}, "t") == {}
-    assert set(_parse_references(s2["references"], "t")["EMA-0002"]) == {"stiffness", "friction"}
+    assert parse_references({}, "t") == {}
+    assert set(parse_references(s2["references"], "t")["EMA-0002"]) == {"stiffness", "friction"}

@@ -116,7 +116,7 @@ def test_trained_twin_not_fed_an_absurd_twist(bags, twin_1khz):
 def test_node_refuses_twin_rate_and_keeps_monitoring(bags, twin_1khz, tmp_path):
     """The onboard node with a 1 kHz twin on a 100 Hz bag: an error naming both rates, and residuals
     all mission long from the stand-in (was: one residual message and no error)."""
-    from hdphm.ros_cli import run_stack_on_bags
+    from hdphm.stack import run_stack_on_bags
 
     w = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
     dom = 225 + (int(w[2:]) if w[2:].isdigit() else 0) % 7

@@ -10,7 +10,7 @@ from hd_onboard.batch import run_mission  # noqa: E402
 from hd_onboard.core import OnboardCore  # noqa: E402
 from hd_onboard.windows import window_row  # noqa: E402
 from hd_onboard.detectors.levels import ERROR, OK, WARN  # noqa: E402
-from hd_onboard.node import _feature_fn  # noqa: E402
+from hd_onboard.features import window_feature_fn  # noqa: E402
 
 #: stated detection delay of a sudden grease loss (friction x4, lubrication_loss severity 3, hd_sim's
 #: mid-mission fault hook, 50 ms ramp) with the physics stand-in twin. Measured over 8 sim missions
@@ -60,7 +60,7 @@ def test_short_path_equals_block_path_on_messy_sim_data():
     keep[6000:6040] = False  # 40 ms dropout: twin reset
     stamps, V = stamps[keep], V[keep]
     stamps[7000] = stamps[6999]  # duplicate stamp: dropped
-    ff = _feature_fn({}, m.meta.gear_ratio)
+    ff = window_feature_fn({}, m.meta.gear_ratio)
     a = OnboardCore(gear_ratio=m.meta.gear_ratio, feature_fn=ff)
     tabs, wins, events = [], [], []
     for i in range(0, len(stamps), 700):
@@ -103,6 +103,7 @@ def test_short_path_with_ground_thresholds_detects_fault():
 
 def test_onboard_eval_false_alarm_rate_on_healthy_bags(tmp_path, healthy):
     from hd_bag import write_mission
+    from hd_ground.references import calibrate_actuator
     from hd_onboard.evaluate import cmd_eval, evaluate_bags
 
     d = tmp_path / "bags"
@@ -112,11 +113,11 @@ def test_onboard_eval_false_alarm_rate_on_healthy_bags(tmp_path, healthy):
     s = evaluate_bags([d])
     assert s["n_missions"] == 4 and s["missions_warn_or_worse"] == 0 and s["false_alarm_rate_per_mission"] == 0.0
     assert all(0 < r["margin"]["Q_red"] < 1 for r in s["missions"])
-    g = evaluate_bags([d], ground=1)  # 2 actuators x 2 missions: 1 calibrates, 1 is scored each
+    g = evaluate_bags([d], ground=1, calibrate=calibrate_actuator)  # 2 actuators x 2 missions: 1 calibrates, 1 is scored each
     assert g["n_missions"] == 2 and set(g["calibration"]) == {m.meta.actuator_id for m in healthy}
     assert all(r["threshold_source"]["Q_red"].startswith("ground") for r in g["missions"])
     with pytest.raises(ValueError, match="need more than"):
-        evaluate_bags([d], ground=2)
+        evaluate_bags([d], ground=2, calibrate=calibrate_actuator)
     with pytest.raises(ValueError, match="no such bag"):
         evaluate_bags([tmp_path / "nope"])
 

@@ -39,7 +39,7 @@ def test_features_monotone_on_simulated_wear_sweep(q_nan):
 def test_prognose_cli_and_metrics(tmp_path):
     from hd_sim.fleet import simulate_fleet
 
-    from hd_prognostic.hd import extract_actuator, fit_population
+    from hd_prognostic.pipeline import extract_actuator, fit_population
     from hdphm.cli import main
 
     fleet = tmp_path / "fleet"

@@ -134,7 +134,7 @@ def test_attach_events_drops_records_after_failure():
 def test_node_tracker_equals_batch(synth_fit, n_draws):
     """The prognostic node's LifeTracker (one window row per mission here) gives batch's posterior, for the
     plug-in model and for a mixture over parameter draws (latent quantiles of the mixture exact on the grids)."""
-    from hd_prognostic.node import PARAMS, LifeTracker
+    from hd_prognostic.tracker import TRACKER_DEFAULTS, LifeTracker
 
     _, _, m = synth_fit
     draws = [{"theta": d["theta"], "inspections": {}} for d in m.draws[:n_draws]]
@@ -145,7 +145,7 @@ def test_node_tracker_equals_batch(synth_fit, n_draws):
     W = np.full(len(u.t), 1.0)  # load clock with W = 1 J per mission: E(k) = k
     u.events = UnitEvents()
     hb = predict_history(m, u, n_samples=200, seed=0)
-    tr = LifeTracker("U", m, dict(PARAMS, rul_particles=200))
+    tr = LifeTracker("U", m, dict(TRACKER_DEFAULTS, rul_particles=200))
     rows = []
     for k in range(len(u.t)):
         tr.mission_index = float(u.t[k])

@@ -29,10 +29,10 @@ def _node_rows(m):
     """The rows the prognostic node receives: the onboard core with the onboard node's feature function."""
     from hd_onboard.batch import run_mission
     from hd_onboard.core import OnboardCore
-    from hd_onboard.node import _feature_fn
+    from hd_onboard.features import window_feature_fn
 
     core = OnboardCore(gear_ratio=m.meta.gear_ratio,
-                       feature_fn=_feature_fn({"torque_constant": m.meta.torque_constant}, m.meta.gear_ratio))
+                       feature_fn=window_feature_fn({"torque_constant": m.meta.torque_constant}, m.meta.gear_ratio))
     return run_mission(m, core)["windows"]
 
 
@@ -41,7 +41,7 @@ def test_batch_and_node_give_the_same_observation(kind):
     from hd_onboard.config import OnboardConfig
     from hd_onboard.features import (OBS_WINDOW_S, onboard_window_features, mission_observation,
                                      mission_observation_features)
-    from hd_prognostic.node import PARAMS, ActuatorTracker
+    from hd_prognostic.tracker import TRACKER_DEFAULTS, ActuatorTracker
 
     assert OBS_WINDOW_S == OnboardConfig().window_s  # batch uses the onboard node's window length
     m = _mission(dropout=kind == "dropout", q_nan=kind == "no_torque_sensor")
@@ -51,7 +51,7 @@ def test_batch_and_node_give_the_same_observation(kind):
     assert [r["t_start"] for r in rows] == [w["t_start"] for w in batch_w]
     batch = mission_observation_features(m)
     # the node's own reduction (the tracker's), fed the onboard core's rows, without ROS
-    tr = ActuatorTracker("EMA-T", None, dict(PARAMS))
+    tr = ActuatorTracker("EMA-T", None, dict(TRACKER_DEFAULTS))
     tr.add_windows(rows)
     y_node, W_node = tr._mission_obs()
     assert math.isfinite(y_node) and y_node > 0 and W_node > 0

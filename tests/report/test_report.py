@@ -74,7 +74,7 @@ def test_report_of_a_fleet_store(small_fleet_dir, tmp_path):
 
 
 def test_recalibration_history_from_recorded_ground_reports(demo_like_run, tmp_path):
-    """The ground node's reports (recalibration at report level, as hd_ground.node.analyse_archive writes
+    """The ground node's reports (recalibration at report level, as hd_ground.analysis.analyse_archive writes
     it) are read from a recorded stack MCAP and shown per analysed actuator."""
     import json
     import shutil

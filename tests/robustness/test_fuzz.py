@@ -16,7 +16,7 @@ from hypothesis import strategies as st  # noqa: E402
 
 from hd_bag import BagError, iter_messages, read_mission, validate_bag, write_mission  # noqa: E402
 from hd_twin import state as sv  # noqa: E402
-from hd_twin.node import apply_update, initial_state  # noqa: E402
+from hd_twin.state import apply_update, initial_state  # noqa: E402
 
 from tests.bag.conftest import make_mission  # noqa: E402
 from tests.bag.hostile import unchunked_bag  # noqa: E402

@@ -9,7 +9,7 @@ import os
 import pytest
 
 from hd_twin import state as sv
-from hd_twin.node import apply_update, initial_state
+from hd_twin.state import apply_update, initial_state
 
 from .hostile_updates import HOSTILE_UPDATES
 
@@ -57,7 +57,7 @@ def test_depth_check_runs_on_the_text_before_json_recursion():
 def test_parse_json_msg_of_the_nodes_has_the_same_caps():
     from types import SimpleNamespace
 
-    from hdphm import rosutil as ru
+    import hd_ros as ru
 
     with pytest.raises(ValueError, match="nested"):
         ru.parse_json_msg(SimpleNamespace(data='{"a": ' + "[" * 100 + "]" * 100 + "}"), "/hd/mission")
@@ -67,7 +67,7 @@ def test_parse_json_msg_of_the_nodes_has_the_same_caps():
 
 
 def test_message_class_imports_only_from_the_fixed_package_table(tmp_path, monkeypatch):
-    from hdphm import rosutil as ru
+    import hd_ros as ru
 
     (tmp_path / "evilpkg").mkdir()
     marker = tmp_path / "PWNED"

@@ -2,7 +2,7 @@
 import numpy as np
 
 from hd_bag.cdr import encode_jointstate, jointstate_layout
-from hdphm import rosutil as ru
+import hd_ros as ru
 
 
 def test_decode_joint_states_matches_per_message_and_names_bad_ones():

@@ -5,7 +5,8 @@ import pytest
 pytest.importorskip("rclpy")
 from tests.robustness import foreign as FB  # noqa: E402
 
-from hdphm.ros_cli import BagSource, run_stack_on_bags  # noqa: E402
+from hd_ros.replay import BagSource  # noqa: E402
+from hdphm.stack import run_stack_on_bags  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 from hd_bag import read_mission, write_mission  # noqa: E402
-from hdphm import rosutil as ru  # noqa: E402
+import hd_ros as ru  # noqa: E402
 from tests.robustness.hostile_updates import HOSTILE_UPDATES  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -120,7 +120,7 @@ def test_every_hostile_update_leaves_all_four_stack_nodes_answering(domain_id):
 def test_twin_node_in_process_keeps_a_bounded_refusal_memory(domain_id):
     from std_msgs.msg import String
 
-    from hdphm.ros_cli import Stack
+    from hdphm.stack import Stack
 
     st = Stack(domain_id, nodes=("twin",))
     try:

@@ -11,8 +11,8 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from hdphm import rosutil as ru  # noqa: E402
-from hdphm.ros_cli import make_node  # noqa: E402
+import hd_ros as ru  # noqa: E402
+from hdphm.stack import make_node  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

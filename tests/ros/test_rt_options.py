@@ -6,7 +6,8 @@ import threading
 import pytest
 
 from hdphm import ros_cli as rc
-from hdphm import rosutil as ru
+import hd_ros as ru
+from hd_ros.replay import Replayer
 
 
 def test_set_thread_realtime_applies_or_says_why():
@@ -40,4 +41,4 @@ def test_node_cli_rt_priority_after_the_node_name():
     with pytest.raises(SystemExit, match="outside 0..99"):
         rc._pop_domain(a)
     with pytest.raises(ValueError, match="batch"):
-        rc.Replayer.__init__(object.__new__(rc.Replayer), None, "max", batch=0)
+        Replayer.__init__(object.__new__(Replayer), None, "max", batch=0)

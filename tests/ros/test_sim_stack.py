@@ -17,8 +17,8 @@ pytest.importorskip("rclpy")
 from tests.onboard.simfix import faulted_mission, sim_mission
 
 from hd_bag import read_mission, validate_bag, write_mission  # noqa: E402
-from hdphm import rosutil as ru  # noqa: E402
-from hdphm.ros_cli import Stack, run_stack_on_bags  # noqa: E402
+import hd_ros as ru  # noqa: E402
+from hdphm.stack import Stack, run_stack_on_bags  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -32,7 +32,7 @@ FAULT_DELAY_S = 2.0
 def fleet(tmp_path_factory):
     import torch
 
-    from hd_prognostic.hd import extract_actuator, fit_population
+    from hd_prognostic.pipeline import extract_actuator, fit_population
     from hd_sim import simulate_fleet
     from hd_twin.train import TrainConfig, train_twin
 
@@ -134,7 +134,7 @@ def test_ground_node_recalibrates_and_pushes_thresholds(fleet, tmp_path, domain_
         assert rc["rows"] >= 2000 and rc["rms_after"] <= rc["rms_before"]
         assert tw.state["params"]["source"].startswith("recalibrated") and onb.twin_params.source.startswith("recalibrated")
         # the next mission of an archived actuator is monitored with the ground's lines
-        from hdphm.ros_cli import Replayer
+        from hd_ros.replay import Replayer
 
         a0 = sorted(acts)[0]
         nxt = [b for t in fleet["train"] for b in sorted(os.listdir(t)) if b.startswith(a0)][3]
@@ -184,7 +184,7 @@ def test_record_split_per_mission_across_processes(tmp_path, domain_id):
 
     from rclpy.node import Node
 
-    from hdphm.ros_cli import Replayer
+    from hd_ros.replay import Replayer
 
     bags = []
     for k in range(2):
@@ -227,7 +227,7 @@ def test_onboard_rt_thread_mode(tmp_path, domain_id):
     """rt_thread: joint states on their own executor thread; every sample processed, fault flagged."""
     from tests.onboard.synth import make_mission
 
-    from hdphm.ros_cli import Replayer
+    from hd_ros.replay import Replayer
 
     bag = str(tmp_path / "f.mcap")
     write_mission(bag, make_mission(duration=8.0, seed=31, fault_at=6.0))

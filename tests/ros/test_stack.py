@@ -7,8 +7,9 @@ pytest.importorskip("rclpy")
 from tests.onboard.synth import make_mission  # noqa: E402
 
 from hd_bag import read_mission, validate_bag, write_mission  # noqa: E402
-from hdphm import rosutil as ru  # noqa: E402
-from hdphm.ros_cli import Replayer, Stack, run_stack_on_bags  # noqa: E402
+import hd_ros as ru  # noqa: E402
+from hd_ros.replay import Replayer  # noqa: E402
+from hdphm.stack import Stack, run_stack_on_bags  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

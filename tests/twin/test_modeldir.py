@@ -30,7 +30,7 @@ def test_read_config_errors_name_the_source(tmp_path):
 def test_every_reader_goes_through_read_config(tmp_path):
     """The twin node and the ground discovery give the reader's error for a directory without config.json."""
     from hd_ground.discovery.pipeline import DiscoveryError, load_twin
-    from hd_twin.node import initial_state
+    from hd_twin.state import initial_state
 
     for call, exc in ((lambda: initial_state(str(tmp_path)), ValueError), (lambda: load_twin(tmp_path), DiscoveryError)):
         with pytest.raises(exc, match=r"not a twin model directory \(no config.json\)"):

@@ -29,15 +29,93 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hd_twin.identify import Shape, fit_separable
+from hd_twin.identify import Shape, fit_separable, presliding_state
 from hd_twin.terms import basis_matrix, evaluate_terms
 
 from .data import Dataset, DiscoveryError
-from .library import Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders
+from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
+                      state_var)
 from .spectrum import OrderSpectrum, analyse_orders
 
 #: Effects the basic twin declares for each target when no twin config is given.
 DEFAULT_DECLARED = {"tau_m": ["coulomb_friction", "viscous_friction"], "Q_red": []}
+
+
+class StateSignals(dict):
+    """A signal table whose pre-sliding state columns (``state_var(var, distance)``) are computed on demand.
+
+    The state (:func:`hd_twin.identify.presliding_state`) depends on the time-ordered path of ``var``, so
+    it is computed on the full series the table was cut from (``source``: signals, segment) and then
+    taken at this table's ``rows``; subsets made with :meth:`rows_of` keep that link.
+    """
+
+    def __init__(self, data: dict, source: tuple[dict, np.ndarray, dict], rows: np.ndarray):
+        super().__init__(data)
+        self._source = source
+        self._rows = np.asarray(rows)
+
+    def __missing__(self, key):
+        if not (isinstance(key, str) and key.startswith(STATE_PREFIX)):
+            raise KeyError(key)
+        full, segment, cache = self._source
+        _, var, dist = key.split(":", 2)
+        if key not in cache:
+            if len(cache) >= 24:  # shape searches visit many distances: keep the latest few
+                cache.pop(next(iter(cache)))
+            cache[key] = presliding_state(full[var], float(dist), segment)
+        return cache[key][self._rows]
+
+    def rows_of(self, idx) -> "StateSignals":
+        return StateSignals({k: v[idx] for k, v in self.items()}, self._source, self._rows[idx])
+
+    def replaced(self, **arrays) -> "StateSignals":
+        out = StateSignals(dict(self), self._source, self._rows)
+        out.update(arrays)
+        return out
+
+
+def _take(sig: dict, idx) -> dict:
+    return sig.rows_of(idx) if isinstance(sig, StateSignals) else {k: v[idx] for k, v in sig.items()}
+
+
+def uses_state(term_or_basis) -> bool:
+    """True if a term (or basis spec list) reads a pre-sliding state column (not a plain measured signal)."""
+    basis = term_or_basis.get("basis", []) if isinstance(term_or_basis, dict) else term_or_basis
+
+    def walk(b):
+        if b.get("op") == "prod":
+            return any(walk(f) for f in b["factors"])
+        return str(b.get("var", "")).startswith(STATE_PREFIX)
+    return any(walk(b) for b in basis)
+
+
+def static_term(term: dict, eps_omega: float | None) -> dict | None:
+    """The term in the static form the twin evaluates sample by sample, or None if it has none.
+
+    The twin carries no path history: a pre-sliding state of theta_m (the friction direction) becomes
+    tanh(omega_m / eps_omega), the direction function with the identified width (the same friction at
+    steady sliding, without the travel-dependent transition); a state of the twist has no static form.
+    """
+    import copy
+
+    def conv(b):
+        if b.get("op") == "prod":
+            fs = [conv(f) for f in b["factors"]]
+            return None if any(f is None for f in fs) else {**b, "factors": fs}
+        v = str(b.get("var", ""))
+        if not v.startswith(STATE_PREFIX):
+            return copy.deepcopy(b)
+        if v.split(":")[1] == "theta_m" and b.get("op") == "var" and eps_omega and eps_omega > 0:
+            return {"op": "sgn", "var": "omega_m", "eps": float(eps_omega)}
+        return None
+    basis = [conv(b) for b in term.get("basis", [])]
+    if any(b is None for b in basis):
+        return None
+    out = copy.deepcopy(term)
+    out["basis"] = basis
+    if uses_state(term):
+        out["form"] = f"{term.get('form', '')} [twin: pre-sliding state replaced by tanh(omega_m / {eps_omega:.3g})]"
+    return out
 
 
 @dataclass
@@ -91,12 +169,18 @@ class SignalResult:
 
 
 def _sgn(eps):
+    """The friction's direction function: tanh(omega_m / eps) for a width, or a given spec (a pre-sliding state)."""
+    if isinstance(eps, dict):
+        return dict(eps)
     return {"op": "sgn", "var": "omega_m", "eps": eps}
 
 
-def baseline_columns(target: str, avail: set[str], declared: list[str], extra_terms: list[dict], sgn_eps: float,
+def baseline_columns(target: str, avail: set[str], declared: list[str], extra_terms: list[dict], sgn_eps,
                      twin_params: dict) -> tuple[list[BaselineColumn], list[str]]:
-    """The twin's model of ``target`` as linear-in-parameter columns; plus notes."""
+    """The twin's model of ``target`` as linear-in-parameter columns; plus notes.
+
+    ``sgn_eps``: the width of the friction's tanh(omega_m / eps), or a basis spec of the direction function
+    (the pre-sliding state when the data prefer a rate-independent transition)."""
     notes: list[str] = []
     cols: list[BaselineColumn] = []
     if target == "tau_m":
@@ -111,9 +195,11 @@ def baseline_columns(target: str, avail: set[str], declared: list[str], extra_te
             "load_dependent_friction": ("c_L", {"op": "prod", "factors": [{"op": "abs", "var": "Q_red"}, _sgn(sgn_eps)]}),
         }
         if "stribeck_friction" in declared and "omega_s" in twin_params:
-            known["stribeck_friction"] = ("T_S_minus_T_C", {"op": "stribeck", "var": "omega_m",
-                                                            "v_s": float(twin_params["omega_s"]),
-                                                            "delta": float(twin_params.get("delta", 1.0)), "eps": sgn_eps})
+            v_s, delta = float(twin_params["omega_s"]), float(twin_params.get("delta", 1.0))
+            known["stribeck_friction"] = ("T_S_minus_T_C", {"op": "stribeck", "var": "omega_m", "v_s": v_s,
+                                                            "delta": delta, "eps": sgn_eps} if not isinstance(sgn_eps, dict)
+                                          else {"op": "prod", "factors": [{"op": "exp_decay", "var": "omega_m",
+                                                                           "v_s": v_s, "delta": delta}, dict(sgn_eps)]})
     elif target == "Q_red":
         # Q_red = K (theta_m/N - theta_f) + c (omega_m/N - omega_f): positive stiffness and damping
         cols.append(BaselineColumn("K", None, {"op": "var", "var": "windup"}))
@@ -502,6 +588,24 @@ def estimate_offset(terms: list[dict], sig: dict, y_rest: np.ndarray, var: str =
 # ---------------------------------------------------------------------------
 
 
+def presliding_range(theta: np.ndarray, omega: np.ndarray, segment: np.ndarray) -> tuple[float, float]:
+    """Search range [rad] of a pre-sliding distance, from the data: from the smallest travel per sample
+    (1st percentile of the non-zero steps; a shorter transition completes within one sample everywhere: a
+    hard sign) to half the median stroke between reversals of the motion (a longer one never completes)."""
+    step = np.abs(np.diff(theta))
+    same = segment[1:] == segment[:-1]
+    step = step[same & (step > 0)]
+    if len(step) < 10:
+        return 0.0, 0.0
+    lo = float(np.quantile(step, 0.01))
+    sg = np.sign(omega)
+    cut = np.flatnonzero((sg[1:] != sg[:-1]) | ~same) + 1
+    bounds = np.r_[0, cut, len(theta)]
+    strokes = [abs(theta[b - 1] - theta[a]) for a, b in zip(bounds[:-1], bounds[1:]) if b - a > 2]
+    hi = 0.5 * float(np.median(strokes)) if strokes else 0.0
+    return lo, max(hi, 0.0)
+
+
 def speed_noise_sigma(omega: np.ndarray, segment: np.ndarray) -> float:
     """Robust white-noise sigma of a measured speed, rad/s (MAD of second differences within segments).
 
@@ -555,7 +659,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     declared = list(DEFAULT_DECLARED.get(target, []) if declared is None else declared)
     extra_terms = list(extra_terms or [])
     twin_params = dict(twin_params or {})
-    sig = ds.signals
+    sig = StateSignals(ds.signals, (ds.signals, ds.segment, {}), np.arange(ds.n))
     avail = {k for k, v in sig.items() if np.std(v) > 0}
     if target not in sig:
         raise DiscoveryError(f"target signal {target} is not measured in {ds.bag_names}")
@@ -570,7 +674,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 "direction is not observable there")
             ds = ds.subset(~still)
             heldout = heldout[~still]
-            sig = ds.signals
+            sig = sig.rows_of(~still)
     fit = ~heldout
     empty = dict(signal=target, declared_before=declared, declared_after=list(declared), baseline_params={},
                  refit_baseline_params={}, effects=[], terms=[], error_before={}, error_after={})
@@ -583,7 +687,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         return SignalResult(identifiable=False, statements=statements + still_note, **empty)
     statements += still_note
 
-    sf = {k: v[fit] for k, v in sig.items()}
+    sf = _take(sig, fit)
     scale = float(np.quantile(np.abs(sf["omega_m"]), 0.9))
     sig_w = max(speed_noise_sigma(sf["omega_m"][ds.bag[fit] == b], ds.segment[fit][ds.bag[fit] == b])
                 for b in np.unique(ds.bag[fit]))
@@ -604,7 +708,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             if c.term is None):
         lo_eps = max(sig_w / 10, 1e-4 * scale, 1e-6)
         hi_eps = max(0.5 * scale, 10 * lo_eps)
-        s_rows = {k: v[srows] for k, v in sig.items()}
+        s_rows = _take(sig, srows)
 
         def design_eps(sh):
             return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, sh["eps"], twin_params)[0],
@@ -621,7 +725,39 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         if sgn_eps < 2 * sig_w:
             statements.append(f"eps is within 2x the speed-noise sigma {sig_w:.3g} rad/s: the transition is not "
                               "resolved beyond the measurement noise (consistent with a hard sign)")
-    cols, notes = baseline_columns(target, avail, declared, extra_terms, sgn_eps, twin_params)
+    # the same transition as a rate-independent (Dahl / LuGre pre-sliding) state of the motor angle: the
+    # friction leaves its old direction over a travel d after each reversal, not over a speed band. The law
+    # is chosen by the same cross-validated error: the pre-sliding state replaces tanh only when its
+    # distance is identified and it lowers the CV error by ``min_gain`` (the selection's own rule)
+    fric = sgn_eps
+    ps_fit = None
+    if eps_fit is not None and "theta_m" in avail:
+        d_lo, d_hi = presliding_range(sf["theta_m"], sf["omega_m"], ds.segment[fit])
+        if d_hi > d_lo:
+            s_rows = _take(sig, srows)
+
+            def design_ps(sh):
+                spec = {"op": "var", "var": state_var("theta_m", sh["d"])}
+                return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, spec, twin_params)[0],
+                                        s_rows)
+            ps_fit = fit_separable(y[srows], design_ps, [c.param for c in bc], ds.block[srows],
+                                   [Shape("d", d_lo, d_hi, log=True, n_grid=12)])
+            gain = 1.0 - (ps_fit.cv_rmse / eps_fit.cv_rmse) ** 2 if eps_fit.cv_rmse > 0 else 0.0
+            d_ps = ps_fit.shape["d"]
+            if ps_fit.identified["d"] and gain >= opt.min_gain:
+                fric = {"op": "var", "var": state_var("theta_m", d_ps)}
+                statements.append(
+                    f"friction transition: a rate-independent pre-sliding state (Dahl / LuGre bristle state) of "
+                    f"theta_m with pre-sliding distance d = {d_ps:.3g} +- {ps_fit.shape_sd['d']:.2g} rad (CV profile "
+                    f"over {d_lo:.3g}..{d_hi:.3g} rad, block jackknife) lowers the cross-validated error by "
+                    f"{gain:.1%} against tanh(omega_m / eps): the friction direction follows the travel since the "
+                    "last reversal; used in the baseline instead of tanh")
+            else:
+                statements.append(
+                    f"friction transition: a pre-sliding state of theta_m (d = {d_ps:.3g} rad) does not improve on "
+                    f"tanh(omega_m / eps) (CV gain {gain:+.1%}"
+                    + ("" if ps_fit.identified["d"] else "; d not identified: " + "; ".join(ps_fit.notes)) + ")")
+    cols, notes = baseline_columns(target, avail, declared, extra_terms, fric, twin_params)
     statements += notes
     Xb_all = _baseline_matrix(cols, sig)
     keep, st = _prune_collinear(Xb_all[fit], [c.param for c in cols])
@@ -634,6 +770,9 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     if eps_fit is not None:
         base_params["eps_omega"] = float(sgn_eps)
         base_params["eps_omega_sd"] = float(eps_fit.shape_sd["eps"])
+    if isinstance(fric, dict):
+        base_params["presliding_distance"] = float(ps_fit.shape["d"])
+        base_params["presliding_distance_sd"] = float(ps_fit.shape_sd["d"])
 
     # 2. residual structure: order spectra on the fit data
     spectra: list[OrderSpectrum] = []
@@ -658,7 +797,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     ctx = LibraryContext(
         target=target, available=avail, omega_scale=scale,
         omega_low=float(np.quantile(np.abs(sf["omega_m"][moving]), 0.1)) if moving.any() else scale,
-        sgn_eps=sgn_eps, t_ref=float(np.median(sf["temperature"])) if "temperature" in sf else 25.0,
+        sgn_eps=sgn_eps, fric_spec=fric if isinstance(fric, dict) else None, t_ref=float(np.median(sf["temperature"])) if "temperature" in sf else 25.0,
         orders=orders, declared=set(declared), excluded=excluded,
         eps_range=(lo_eps, hi_eps) if eps_fit is not None else None,
         short_stroke={v: (float(np.median(sf[v])), float(np.ptp(sf[v]) / 2)) for v in ("theta_m", "theta_f")
@@ -687,7 +826,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     X_all = np.concatenate([Xb_all] + Xc_cols, 1) if Xc_cols else Xb_all
     gram = _BlockGram(X_all[fit], y[fit], ds.block[fit])
     base_idx = list(range(Xb_all.shape[1]))
-    s_rows = {k: v[srows] for k, v in sig.items()}
+    s_rows = _take(sig, srows)
     y_ref = float(np.sqrt(np.mean(y[srows] ** 2)))
 
     def _shape_fit(gi, cur_idx, jackknife):
@@ -771,13 +910,12 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 if not periodic_m:
                     continue
                 others = [t for t in terms if t not in periodic_m]
-                s_c = {k: v[calib] for k, v in sig.items()}
+                s_c = _take(sig, calib)
                 y_rest = y[calib] - base_pred[calib] - (evaluate_terms(others, s_c) if others else 0.0)
                 d = estimate_offset(periodic_m, s_c, y_rest)
                 offsets[ds.bag_names[b]] = d
                 shift[rows] = d
-            sig_eval = dict(sig)
-            sig_eval["theta_m"] = sig["theta_m"] + shift
+            sig_eval = sig.replaced(theta_m=sig["theta_m"] + shift)
         X_eval = X_all if sig_eval is sig else np.concatenate(
             [Xb_all] + [basis_matrix(c.basis, sig_eval) for c, _ in groups], 1) if groups else Xb_all
         r_before = y - Xb_all @ beta_b
@@ -854,7 +992,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     for t in terms[:4]:
         v = t["variable"]
         if v in sig:
-            plot[f"term:{t['name']}:{v}:{t['order']}"] = (sig[v][score], evaluate_terms([t], {k: a[score] for k, a in sig.items()}),
+            plot[f"term:{t['name']}:{v}:{t['order']}"] = (sig[v][score], evaluate_terms([t], _take(sig, score)),
                                                          r_before[score])
     return SignalResult(
         signal=target, identifiable=True, statements=statements, declared_before=declared,

@@ -109,6 +109,7 @@ def greedy_discover(ds: Dataset, target: str, heldout: np.ndarray, *, min_gain: 
         chosen.append(i)
         cur = e
     _, beta = ho_sse(X)
+    r_ho = (y - X @ beta)[ho]
     effects, pos = [], Xb.shape[1]
     for i in chosen:
         name, var, order, cols = groups[i]
@@ -121,4 +122,4 @@ def greedy_discover(ds: Dataset, target: str, heldout: np.ndarray, *, min_gain: 
     sd = float(np.std(y[ho]))
     err = lambda sse: {"rmse": float(np.sqrt(sse / n)), "nrmse": float(np.sqrt(sse / n)) / sd, "n": n}
     return {"signal": target, "eps": float(eps), "error_before": err(before), "error_after": err(cur),
-            "effects": effects}
+            "effects": effects, "residual_heldout": r_ho}

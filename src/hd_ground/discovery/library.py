@@ -27,6 +27,16 @@ from hd_twin.identify import Shape
 from hd_twin.terms import harmonic_amplitude_phase, make_term, sin_cos_pair
 
 
+#: Name prefix of a pre-sliding state column (``hd_twin.identify.presliding_state`` of a measured angle or
+#: twist at a distance): computed by discovery from the time-ordered series, not a measured signal.
+STATE_PREFIX = "presliding:"
+
+
+def state_var(var: str, distance: float) -> str:
+    """Column name of the pre-sliding state of ``var`` at ``distance`` (same unit as ``var``)."""
+    return f"{STATE_PREFIX}{var}:{float(distance)!r}"
+
+
 @dataclass
 class Candidate:
     """One candidate term group."""
@@ -78,6 +88,7 @@ class LibraryContext:
     omega_low: float  # rad/s, robust low-speed scale (q10 of |omega_m| where moving)
     sgn_eps: float  # rad/s, width of the smoothed sign
     t_ref: float  # degC, reference temperature (median of the fit data)
+    fric_spec: dict | None = None  # the baseline's friction direction when it is a pre-sliding state (else tanh)
     orders: dict[str, list[float]] = field(default_factory=dict)  # variable -> harmonic orders to try
     declared: set[str] = field(default_factory=set)  # the twin's declared effects (never re-proposed)
     excluded: set[str] = field(default_factory=set)  # names/variables that cannot be identified on these data
@@ -114,6 +125,9 @@ def build_candidates(ctx: LibraryContext) -> list[Candidate]:
 
 
 def _sgn(ctx, var="omega_m"):
+    """The friction direction the baseline identified: tanh(omega_m / eps) or the pre-sliding state."""
+    if var == "omega_m" and ctx.fric_spec is not None:
+        return dict(ctx.fric_spec)
     return {"op": "sgn", "var": var, "eps": ctx.sgn_eps}
 
 
@@ -153,19 +167,36 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
                  "eps": eps}]
 
     sh0 = {"omega_s": float(np.sqrt(lo * hi)), "delta": 1.0, "eps": e0}
-    out.append(Candidate(
-        "stribeck_friction", "stribeck", "omega_m", None, stribeck_basis(sh0),
-        "T_C tanh(omega_m/eps) + (T_S - T_C) exp(-(|omega_m|/omega_s)^delta) tanh(omega_m/eps)",
-        lambda c: {"T_C": float(c[0]), "T_S_minus_T_C": float(c[1])},
-        requires=("omega_m",), nonlinear=dict(sh0), positive=True, test_cols=(1,),
-        shapes=[Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5),
-                Shape("eps", *ctx.eps_range, log=True, n_grid=8)] if ctx.eps_range else
-               [Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5)],
-        # the curve decides: omega_s must be identified; the exponent trades off against omega_s on finite
-        # data (reported with its SD, or as a bound), the width is the baseline's, re-identified
-        nuisance=("eps", "delta"), replaces=("T_C",),
-        make_basis=stribeck_basis,
-    ))
+    if ctx.fric_spec is not None:
+        # the baseline's friction follows a pre-sliding state s: the Stribeck excess rides on the same state
+        # (LuGre's g(omega) = T_C + (T_S - T_C) exp(-(|omega|/omega_s)^delta) scales the bristle state)
+        def stribeck_state(sh):
+            z = dict(ctx.fric_spec)
+            return [dict(z), {"op": "prod", "factors": [{"op": "exp_decay", "var": "omega_m", "v_s": float(sh["omega_s"]),
+                                                         "delta": float(sh["delta"])}, dict(z)]}]
+        sh1 = {"omega_s": sh0["omega_s"], "delta": 1.0}
+        out.append(Candidate(
+            "stribeck_friction", "stribeck", "omega_m", None, stribeck_state(sh1),
+            "[T_C + (T_S - T_C) exp(-(|omega_m|/omega_s)^delta)] s, s the pre-sliding state of theta_m",
+            lambda c: {"T_C": float(c[0]), "T_S_minus_T_C": float(c[1])},
+            requires=("omega_m",), nonlinear=dict(sh1), positive=True, test_cols=(1,),
+            shapes=[Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5)],
+            nuisance=("delta",), replaces=("T_C",), make_basis=stribeck_state,
+        ))
+    if ctx.fric_spec is None:
+        out.append(Candidate(
+            "stribeck_friction", "stribeck", "omega_m", None, stribeck_basis(sh0),
+            "T_C tanh(omega_m/eps) + (T_S - T_C) exp(-(|omega_m|/omega_s)^delta) tanh(omega_m/eps)",
+            lambda c: {"T_C": float(c[0]), "T_S_minus_T_C": float(c[1])},
+            requires=("omega_m",), nonlinear=dict(sh0), positive=True, test_cols=(1,),
+            shapes=[Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5),
+                    Shape("eps", *ctx.eps_range, log=True, n_grid=8)] if ctx.eps_range else
+                   [Shape("omega_s", lo, hi, log=True, n_grid=8), Shape("delta", 0.3, 5.0, log=True, n_grid=5)],
+            # the curve decides: omega_s must be identified; the exponent trades off against omega_s on finite
+            # data (reported with its SD, or as a bound), the width is the baseline's, re-identified
+            nuisance=("eps", "delta"), replaces=("T_C",),
+            make_basis=stribeck_basis,
+        ))
     # Temperature-dependent friction: viscous and Coulomb coefficients drifting with T.
     tref = {"op": "offset", "var": "temperature", "ref": ctx.t_ref}
     out.append(Candidate(
@@ -327,6 +358,25 @@ def twist_shape_candidates(ctx: LibraryContext) -> list[Candidate]:
         shapes=[Shape("j", w_lo, w_hi, log=True, n_grid=12)], make_basis=dz_basis_diff,
     )
     out.append(c)
+
+    # hysteresis as the rate-independent state of the twist (Dahl; Bouc-Wen with n = 1, gamma = 0: PHYSICS.md
+    # 2.2): the transmitted torque gains T_h s, s leaving its old level over a twist travel d_h after each
+    # reversal of the twist; the loop's width at zero torque is 2 T_h / K. d_h identified by the CV profile
+    def dahl_basis(sh):
+        return [{"op": "var", "var": state_var("windup", sh["d_h"])}]
+
+    out.append(Candidate(
+        "hysteresis", "hysteresis", "windup", None, dahl_basis({"d_h": np.sqrt(w_lo * w_hi)}),
+        "T_h s(w; d_h), ds/dw = (sgn(dw) - s) / d_h (Dahl / Bouc-Wen state of the twist w = theta_m/N - theta_f)",
+        lambda c: {"T_h": float(c[0])}, requires=("windup",),
+        # a hysteresis loop dissipates: T_h > 0
+        positive=True, nonlinear={"d_h": float(np.sqrt(w_lo * w_hi))},
+        # up to the peak-to-peak twist: a longer distance never approaches saturation (s linear in the travel)
+        shapes=[Shape("d_h", w_lo, max(2.0 * ctx.windup_scale, 4 * w_lo), log=True, n_grid=12)],
+        # the loop decides (T_h, jackknife Wald and CV); a loop that never saturates within the twist range
+        # bounds d_h only from below: reported with that note, not a reason to reject the loop
+        nuisance=("d_h",), make_basis=dahl_basis,
+    ))
     if "windup_dot" in ctx.available and ctx.windup_dot_scale > 0:
         v_lo = max(1e-4 * ctx.windup_dot_scale, 1e-12)
         v_hi = 0.5 * ctx.windup_dot_scale

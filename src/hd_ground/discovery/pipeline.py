@@ -19,7 +19,7 @@ import numpy as np
 from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
-from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout
+from .core import DEFAULT_DECLARED, Options, SignalResult, discover_signal, split_fit_heldout, static_term
 from .data import Dataset, DiscoveryError, dataset_from_missions
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
@@ -69,12 +69,14 @@ def run_discovery(
     retrain: bool = False,
     log=print,
     missions=None,
+    results_out: list | None = None,
 ) -> dict:
     """Run discovery on ``bags`` and write OUT_DIR; returns the report dict.
 
     ``heldout``: bag names/paths (or substrings) held out whole; default: the
     last bag when there are several, else the last ``heldout_frac`` of time of
-    each bag. ``missions`` (already read, same order as ``bags``) skips reading.
+    each bag. ``missions`` (already read, same order as ``bags``) skips reading. ``results_out``: a list
+    that receives the per-signal :class:`SignalResult` objects (held-out residual arrays for evaluations).
     """
     opt = opt or Options()
     out = Path(out_dir)
@@ -129,6 +131,8 @@ def run_discovery(
         log(f"{target}: discovering (declared: {decl or 'none'}) ...")
         res = discover_signal(ds, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
         results.append(res)
+        if results_out is not None:
+            results_out.append(res)
         _log_result(res, log)
 
     within = {}
@@ -211,8 +215,19 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
 def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
                        retrain: bool, missions, log) -> Path | None:
     """Write the augmented model version (only when something was found)."""
-    new_terms = [t for r in results for t in r.terms]
-    if not new_terms:
+    # the twin evaluates static terms sample by sample: a term on a pre-sliding state (a path history) goes
+    # in its static form (hd_ground.discovery.core.static_term); one without such a form stays in the report
+    new_terms, dropped = [], []
+    for r in results:
+        for t in r.terms:
+            st = static_term(t, r.baseline_params.get("eps_omega"))
+            (new_terms if st is not None else dropped).append(st if st is not None else t)
+    if dropped:
+        # the new version still declares them (and carries the recalibrated baseline): a found effect is never
+        # silently lost from the model's record
+        log(f"declared in the new twin version without a term (they need a state of the twist the twin does not "
+            f"carry): {[t['name'] for t in dropped]}")
+    if not new_terms and not dropped:
         log("twin unchanged (no effect found)")
         return None
     if dst.exists():

@@ -16,7 +16,7 @@ Per actuator the graph is::
   statistics and monitor outputs of the onboard core run with the ground calibration
   (:func:`hd_onboard.batch.run_mission`), and the mission's recalibration inputs (the least-squares
   estimates of :func:`hd_ground.recalibration.recalibrate` on that mission alone: which parameters move);
-* :func:`actuator_task` updates the actuator's RUL history (:func:`hd_prognostic.hd.prognose` over the
+* :func:`actuator_task` updates the actuator's RUL history (:func:`hd_prognostic.pipeline.prognose` over the
   stored mission observations) and its fault-class probabilities (:mod:`hd_ground.fleet.classify`).
 
 Nothing here reads ``/sim``. Every result is a deterministic function of the bags and the options, so a
@@ -296,8 +296,8 @@ def discover_task(paths: list[str], store_dir: str, type_key: str, opts: FleetOp
 
 
 def _actuator_data(store, actuator_id: str):
-    """:class:`hd_prognostic.hd.ActuatorData` from the stored mission observations (no bag read)."""
-    from hd_prognostic.hd import ActuatorData
+    """:class:`hd_prognostic.pipeline.ActuatorData` from the stored mission observations (no bag read)."""
+    from hd_prognostic.pipeline import ActuatorData
 
     feats = sorted(store.read_mission_rows(actuator_id, "features"), key=lambda r: r["mission_index"])
     mrows = {r["mission_index"]: r for r in store.read_mission_rows(actuator_id, "missions")}
@@ -315,7 +315,7 @@ def _actuator_data(store, actuator_id: str):
 
 def rul_rows(store, actuator_id: str, opts: FleetOptions) -> list[dict]:
     """RUL history of one actuator from its stored observations (the prognostic core, batch)."""
-    from hd_prognostic.hd import DEFAULT_OBS_MODEL, prognose
+    from hd_prognostic.pipeline import DEFAULT_OBS_MODEL, prognose
     from hd_prognostic.observation import ObservationModel
 
     a = _actuator_data(store, actuator_id)

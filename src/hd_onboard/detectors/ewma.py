@@ -28,57 +28,12 @@ and pushes them through the twin core.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.signal import lfilter
 
 from hd_onboard.detectors.levels import run_lengths
-
-
-@dataclass
-class ChannelThreshold:
-    """Normalisation and alarm lines of one residual channel of one actuator.
-
-    ``mu`` and ``sigma`` in the channel's unit (N*m for ``Q_red``, rad for
-    ``twist``); ``h_warn`` and ``h_error`` in units of sigma on the EWMA of the
-    normalised residual; ``source`` says where they came from.
-    """
-
-    mu: float
-    sigma: float
-    h_warn: float
-    h_error: float
-    source: str = "default"
-
-    def validate(self, where: str) -> "ChannelThreshold":
-        for k in ("mu", "sigma", "h_warn", "h_error"):
-            v = getattr(self, k)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
-                raise ValueError(f"{where}: threshold {k} = {v!r} is not a finite number")
-        if self.sigma <= 0:
-            raise ValueError(f"{where}: sigma = {self.sigma} must be > 0")
-        if not 0 < self.h_warn <= self.h_error:
-            raise ValueError(f"{where}: need 0 < h_warn <= h_error, got h_warn={self.h_warn}, h_error={self.h_error}")
-        if self.h_error > 1e6:
-            raise ValueError(f"{where}: h_error = {self.h_error} is absurd (units of sigma)")
-        return self
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict, where: str) -> "ChannelThreshold":
-        if not isinstance(d, dict):
-            raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
-        try:
-            t = cls(mu=float(d["mu"]), sigma=float(d["sigma"]), h_warn=float(d["h_warn"]),
-                    h_error=float(d["h_error"]), source=str(d.get("source", "update")))
-        except KeyError as e:
-            raise ValueError(f"{where}: missing threshold key {e}") from None
-        except (TypeError, ValueError):
-            raise ValueError(f"{where}: threshold values must be numbers, got {d!r}") from None
-        return t.validate(where)
+from hd_twin.records import ChannelThreshold  # noqa: F401 - the twin state's record, defined there
 
 
 def ewma(z: np.ndarray, lam: float, e0: float) -> np.ndarray:

@@ -5,58 +5,14 @@ friction-excess estimator and flag (:class:`FrictionMonitor`)."""
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from hd_onboard.detectors.regression import EWMonitor, group_ls
+from hd_twin.records import FrictionReference  # noqa: F401 - the twin state's record, defined there
 
 #: EW moment channels of :class:`FrictionMonitor`: weight, u, y, uu, uy
 _FM_NCH = 5
-
-
-@dataclass
-class FrictionReference:
-    """Healthy friction mismatch of one actuator: ``r_Q = a + b u``, ``u = tanh(omega_m/eps)``.
-
-    ``r_Q`` [N*m] is the output-torque residual (measured - expected Q_red); the twin's
-    declared friction is already in the expected torque, so ``b`` [N*m] is this unit's
-    output-referred Coulomb-like friction not explained by the twin (negative: more
-    friction than the twin's). ``a`` [N*m] offset (sensor zero, load-model bias);
-    ``eps`` [rad/s] width of the regularised sign (the twin's ``eps_omega``);
-    ``scale`` [N*m] the friction unit the excess is expressed in (the twin's nominal
-    output-referred Coulomb torque ``N T_C``); ``n`` samples it was fitted on.
-    """
-
-    a: float
-    b: float
-    eps: float
-    scale: float
-    n: int
-    source: str = "mission warm-up"
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "friction reference") -> "FrictionReference":
-        """Validated reference from a mapping (twin state / ground update); ValueError naming ``where``."""
-        if not isinstance(d, dict):
-            raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
-        try:
-            r = cls(a=float(d["a"]), b=float(d["b"]), eps=float(d["eps"]), scale=float(d["scale"]),
-                    n=int(d.get("n", 0)), source=str(d.get("source", "update")))
-        except KeyError as e:
-            raise ValueError(f"{where}: missing key {e}") from None
-        except (TypeError, ValueError):
-            raise ValueError(f"{where}: values must be numbers, got {d!r}") from None
-        if not all(math.isfinite(v) for v in (r.a, r.b, r.eps, r.scale)):
-            raise ValueError(f"{where}: a, b, eps, scale must be finite, got {d!r}")
-        if not (r.eps > 0 and r.scale > 0):
-            raise ValueError(f"{where}: need eps > 0 and scale > 0, got eps={r.eps}, scale={r.scale}")
-        if abs(r.b) > 1e3 * r.scale:
-            raise ValueError(f"{where}: |b| = {abs(r.b):g} N*m is absurd against scale {r.scale:g} N*m")
-        return r
 
 
 def fit_friction_reference(r_Q: np.ndarray, omega_m: np.ndarray, eps: float, scale: float, min_samples: int = 200,

@@ -5,11 +5,11 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from hd_onboard.detectors.regression import EWMonitor, group_ls
+from hd_twin.records import StiffnessReference  # noqa: F401 - the twin state's record, defined there
 
 #: EW moment channels of :class:`StiffnessMonitor`: weight, x, u, y, xx, uu, xu, xy, uy
 _SM_NCH = 9
@@ -27,59 +27,6 @@ def stiffness_basis(Q: np.ndarray, q1: float, q2: float) -> np.ndarray:
     s, a = np.sign(Q), np.abs(Q)
     return np.column_stack([Q, s * np.minimum(a, q1), s * np.minimum(a, q2)])
 
-
-@dataclass
-class StiffnessReference:
-    """Healthy torsion law of one actuator: ``twist = a + b tanh(omega_m/eps) + g(Q)``.
-
-    ``twist = theta_f - theta_m/N`` [rad]; ``g(Q) = stiffness_basis(Q, q1, q2) @ c`` [rad];
-    ``g_scale`` [rad] = std of g over the reference data (normalises the regression);
-    ``q_range`` [N*m] the largest |Q| seen; ``compliance`` [rad/(N*m)] the secant compliance
-    ``g(q_range)/q_range`` (reported). ``source`` says where it came from.
-    """
-
-    a: float
-    b: float
-    c: tuple
-    q1: float
-    q2: float
-    eps: float
-    g_scale: float
-    q_range: float
-    compliance: float
-    n: int
-    source: str = "mission warm-up"
-
-    def g(self, Q):
-        Q = np.asarray(Q, float)
-        c0, c1, c2 = self.c
-        s, a = np.sign(Q), np.abs(Q)
-        return c0 * Q + c1 * s * np.minimum(a, self.q1) + c2 * s * np.minimum(a, self.q2)
-
-    def to_dict(self) -> dict:
-        d = asdict(self)
-        d["c"] = list(self.c)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "stiffness reference") -> "StiffnessReference":
-        if not isinstance(d, dict):
-            raise ValueError(f"{where}: expected a mapping, got {type(d).__name__}")
-        try:
-            r = cls(a=float(d["a"]), b=float(d["b"]), c=tuple(float(v) for v in d["c"]), q1=float(d["q1"]),
-                    q2=float(d["q2"]), eps=float(d["eps"]), g_scale=float(d["g_scale"]), q_range=float(d["q_range"]),
-                    compliance=float(d.get("compliance", math.nan)), n=int(d.get("n", 0)),
-                    source=str(d.get("source", "update")))
-        except KeyError as e:
-            raise ValueError(f"{where}: missing key {e}") from None
-        except (TypeError, ValueError):
-            raise ValueError(f"{where}: values must be numbers, got {d!r}") from None
-        vals = [r.a, r.b, *r.c, r.q1, r.q2, r.eps, r.g_scale, r.q_range]
-        if len(r.c) != 3 or not all(math.isfinite(v) for v in vals):
-            raise ValueError(f"{where}: need three finite coefficients c and finite a, b, q1, q2, eps, g_scale, q_range")
-        if not (0 < r.q1 < r.q2 and r.eps > 0 and r.g_scale > 0 and r.q_range > 0):
-            raise ValueError(f"{where}: need 0 < q1 < q2, eps > 0, g_scale > 0, q_range > 0")
-        return r
 
 def fit_stiffness_reference(twist: np.ndarray, Q: np.ndarray, omega_m: np.ndarray, eps: float,
                             min_samples: int = 200, source: str = "mission warm-up",

@@ -1,4 +1,4 @@
-"""Harmonic-drive prognosis from an actuator's bags: features -> Archard PF -> RUL per mission.
+"""The per-actuator prognosis pipeline, from an actuator's bags: features -> Archard PF -> RUL per mission.
 
 * :func:`extract_actuator` reads every bag of one actuator (contract topics
   only; ``/sim/health`` only with ``include_truth=True``, which the
@@ -348,6 +348,15 @@ def _hours_per_mission(hours: np.ndarray, mission_index: np.ndarray) -> float | 
 
 
 PF_DEFAULTS = dict(likelihood="student_t", roughening=0.05, kernel="gordon", discount=0.98)
+
+
+def pf_settings(obs: ObservationModel, likelihood: str = "student_t", pf_options: dict | None = None) -> dict:
+    """ParticleFilter keyword arguments of the mission-step filter, batch (:func:`prognose`) and node
+    (:class:`hd_prognostic.tracker.ActuatorTracker`) alike: :data:`PF_DEFAULTS`, the Liu-West kernel
+    when the observation model's prior is per lifetime (``kappa_lifetime``), then ``pf_options``."""
+    return {**PF_DEFAULTS, "likelihood": likelihood,
+            **({"kernel": "liu_west"} if obs.degradation.get("kappa_lifetime") else {}),
+            **(pf_options or {})}
 #: the joint estimator (offset state, Liu-West kernel, h = kappa U, predictive prior): better wear
 #: tracking, RUL accuracy not better (README "Joint offset estimator")
 JOINT = dict(baseline="state", kappa_lifetime=True, predictive_prior=True, pf_options={"kernel": "liu_west"})
@@ -359,7 +368,7 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
              snapshots: tuple[int, ...] = (), pf_options: dict | None = None) -> RULHistory:
     """Particle-filter prognosis over one actuator's missions; RUL in missions at every mission.
 
-    ``pf_options`` override :data:`PF_DEFAULTS` (ParticleFilter keyword arguments).
+    ``pf_options`` override :func:`pf_settings` (ParticleFilter keyword arguments).
     """
     model = build_model(obs)
     t, y, expo = mission_sequence(a, obs)
@@ -371,10 +380,7 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
 
     hist = track(model, t, y, expo, future, rul_step=1.0, max_steps=max_missions,
                  t_start=t[0] if t_start is None else t_start, unit=a.actuator_id,
-                 pf_kwargs={**PF_DEFAULTS, "likelihood": likelihood,
-                            **({"kernel": "liu_west"} if obs.degradation.get("kappa_lifetime") else {}),
-                            **(pf_options or {}),
-                            "n_particles": n_particles, "seed": seed},
+                 pf_kwargs={**pf_settings(obs, likelihood, pf_options), "n_particles": n_particles, "seed": seed},
                  progress=progress, rul_particles=rul_particles, snapshots=snapshots)
     hours = a.operating_hours
     notes = []

@@ -1,6 +1,7 @@
-"""Managed (lifecycle) node base of the four hdphm nodes (``rclpy.lifecycle``).
+"""Managed (lifecycle) node base of the four hdphm nodes (``rclpy.lifecycle``), and the node boilerplate
+they share (parameter overrides, declaring a parameter table as ``self.p``).
 
-Imported only where rclpy already is (inside the nodes' ``make_node``).
+Imports rclpy at module level: import it only where rclpy is wanted (the node modules).
 
 A node subclass splits its set-up into ``__init__`` (declare parameters, nothing else) and
 ``configure()`` (read parameters, load the model, create publishers, subscriptions, timers and
@@ -24,18 +25,35 @@ lifecycle manager (``/NAME/change_state``, ``/NAME/get_state`` services).
 
 from __future__ import annotations
 
+from typing import Any
+
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+
+def declare(node, params: dict[str, Any]) -> dict[str, Any]:
+    """Declare ``params`` (name -> default) on ``node`` and return their current values."""
+    return {k: node.declare_parameter(k, v).value for k, v in params.items()}
 
 
 class ManagedNode(LifecycleNode):
-    def __init__(self, node_name: str, **kwargs):
+    """Base of the stack's nodes. ``params`` (name -> default) are declared and their values kept in
+    ``self.p`` (re-read on every configure); ``overrides`` (name -> value) win over a params file;
+    ``param_services=False`` creates no ``ros2 param`` services (fewer entities to wait on)."""
+
+    def __init__(self, node_name: str, params: dict[str, Any] | None = None,
+                 overrides: dict[str, Any] | None = None, *, context=None, param_services: bool = True, **kwargs):
         self._hd_configuring = False
         self._hd_active = False
         self._hd_owned: list = []
         self._hd_pending: dict = {}  # latched messages received while inactive, delivered on activation
         self.configure_error: Exception | None = None
-        super().__init__(node_name, **kwargs)
+        if overrides:
+            kwargs["parameter_overrides"] = [Parameter(k, value=v) for k, v in overrides.items()]
+        super().__init__(node_name, context=context, start_parameter_services=param_services, **kwargs)
+        if params is not None:
+            self.p = declare(self, params)
 
     # ---- hooks for subclasses -------------------------------------------------------------------
     def configure(self) -> None:  # pragma: no cover - every node overrides it
