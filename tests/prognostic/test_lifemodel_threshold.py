@@ -77,14 +77,14 @@ def test_two_failures_get_draws_under_a_proper_prior(obs_fleet):
     m = LifeModel.fit(two, threshold="observable", n_draws=12, seed=0)
     pu = m.fit_info["parameter_uncertainty"]
     assert "half-Cauchy" in pu["prior"]
-    assert len(m.draws) == 10 and pu["distinct_draws"] >= 3
+    assert len(m.draws) == 12 and pu["distinct_draws"] >= 3
     s = np.array([math.exp(d["theta"]["log_s"]) for d in m.draws])
     sa = np.array([math.exp(d["theta"]["log_sa"]) for d in m.draws])
     assert np.all(np.isfinite(s)) and s.max() < 20 and sa.max() < 100 * np.std(np.concatenate([u.y for u in two]))
     u = test[0]
     u.events = UnitEvents()
     h = predict_history(m, u, n_samples=100, seed=0)
-    assert h.meta["parameter_draws"] == 10 and np.all(np.isfinite(h.p50))
+    assert h.meta["parameter_draws"] == 12 and np.all(np.isfinite(h.p50))
 
 
 def test_known_failure_level_fixes_the_observable_threshold(obs_fleet, latent_scores):
@@ -103,3 +103,26 @@ def test_known_failure_level_fixes_the_observable_threshold(obs_fleet, latent_sc
     c_l, i_l, p_l = latent_scores
     assert 0.85 <= c_o <= 0.95 and abs(c_o - 0.9) < abs(c_l - 0.9)
     assert p_o < p_l and i_o > i_l
+
+
+def test_node_tracker_equals_batch_with_the_observable_threshold(obs_fleet):
+    """The prognostic node's LifeTracker with an observable-threshold model gives the batch prognosis."""
+    from hd_prognostic.tracker import TRACKER_DEFAULTS, LifeTracker
+
+    units, test, _ = obs_fleet
+    f = LifeModel.fit(units, threshold="observable", n_draws=0)
+    m = LifeModel(f.theta, f.E_ref, "load", "HF_MTW_IF", {}, f.fit_info)
+    assert m.threshold == "observable"
+    u = test[0]
+    u = type(u)(u.unit, u.t, u.y, u.E, u.discrete, u.E_next)
+    hb = predict_history(m, u, n_samples=300, seed=0)
+    tr = LifeTracker("U", m, dict(TRACKER_DEFAULTS, rul_particles=300))
+    rows = []
+    for k in range(len(u.t)):
+        tr.mission_index = float(u.t[k])
+        tr.add_windows([{"feat.HF_MTW_IF": float(u.y[k]), "feat.W_load": 1.0}])  # E(k) = k
+        rows.append(tr.estimate(final=True))
+    for k in (1, len(u.t) // 2, len(u.t) - 1):
+        assert rows[k]["h_mean"] == pytest.approx(hb.state_mean[k][0], rel=1e-9)
+        assert rows[k]["rul_p50"] == pytest.approx(hb.p50[k], rel=0.15, abs=2)
+        assert rows[k]["rul_p5"] <= hb.p50[k] <= rows[k]["rul_p95"]
