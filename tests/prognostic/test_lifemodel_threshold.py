@@ -16,7 +16,7 @@ from tests.prognostic.lifesynth import TRUTH_OBS, synth_units, synth_units_obser
 @pytest.fixture(scope="module")
 def obs_fleet():
     units, _ = synth_units_observable(12, seed=1)
-    test, eol = synth_units_observable(8, seed=7)
+    test, eol = synth_units_observable(6, seed=7)
     return units, test, eol
 
 
