@@ -42,8 +42,8 @@ Parameter draws: uniform prior on the standard deviations with >= 3 failures (Ge
 that posterior is improper, half-Cauchy priors on the between-unit scales (``s``: scale 1, ``s_a`` and ``s_Y``: the
 HI's standard deviation over the training records, ``s_D``: 1), Gelman's recommendation for few groups.
 
-Prognosis of one unit at time t_k (latent threshold): the posterior over z on the same grid (its HI and inspections up to t_k,
-survival to ``E(t_k)``), then ``ln D`` from its prior truncated to ``ln D > z + b ln E(t_k)``, the failure
+Prognosis of one unit at time t_k (latent threshold): the posterior over z on the same grid (its HI and inspections
+up to t_k, survival to ``E(t_k)``), then ``ln D`` from its prior truncated to ``ln D > z + b ln E(t_k)``, the failure
 exposure ``E_f = E_ref (D / r)^(1/b)`` and the failure time from the unit's own exposure rate.
 """
 
@@ -723,7 +723,8 @@ class LifeModel:
         ``fit_info["threshold_candidates"]``). ``failure_level``: the HI level that defines failure when the
         failure definition is on the measured HI and its level is known (NASA: 80 % of rated capacity, Virkler:
         49.8 mm): the observable threshold's median Y0 is then fixed there (its scatter s_Y still fitted) instead
-        of being estimated from the gap between the last record and the unrecorded value at failure. ``n_draws`` posterior draws of the population parameters
+        of being estimated from the gap between the last record and the unrecorded value at failure.
+        ``n_draws`` posterior draws of the population parameters
         (:func:`_posterior_draws`; 0: point estimate only) carry the parameter uncertainty of a small fleet into
         the prognosis."""
         if threshold not in THRESHOLDS + ("auto",):
@@ -784,7 +785,8 @@ class LifeModel:
             insp0[q] = {"alpha": float(coef[0]), "beta": float(coef[1]), "log_tau": math.log(sd)}
         batch = _Batch(units, E_ref, quantities=qs)
         ik = [f"{q}|{k}" for q in qs for k in ("alpha", "beta", "log_tau")]
-        iscale = [max(abs(insp0[q][k]), 1e-9) if k != "log_tau" else 1.0 for q in qs for k in ("alpha", "beta", "log_tau")]
+        iscale = [max(abs(insp0[q][k]), 1e-9) if k != "log_tau" else 1.0
+                  for q in qs for k in ("alpha", "beta", "log_tau")]
         ix0 = [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")]
 
         def setup(kind):
@@ -792,7 +794,7 @@ class LifeModel:
             if kind == "latent":
                 names, t0 = list(cls.PARAMS), dict(theta0)
                 scale = [1.0, 1.0, 1.0, abs(c0), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, 1.0, 1.0]
-            else:  # the latent scale is fixed by mu = 0 (no latent threshold): c = HI change of the median unit at E_ref
+            else:  # the latent scale is fixed by mu = 0 (no latent threshold): c = median unit's HI change at E_ref
                 names = list(cls.PARAMS_OBS)
                 yfa = np.array(yf)
                 t0 = dict(theta0, c=c0 * math.exp(theta0["mu"]), mu=0.0, Y0=float(np.median(yfa)),

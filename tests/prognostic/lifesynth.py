@@ -55,7 +55,8 @@ def synth_units(n: int, seed: int, truth: dict = TRUTH, censor_frac: float = 0.3
 TRUTH_OBS = {"s": 0.25, "b": 1.6, "c": 2.0, "a0": 1.0, "sa": 0.3, "sigma": 0.08, "rho": 0.8, "Y0": 3.0, "sY": 0.03}
 
 
-def synth_units_observable(n: int, seed: int, truth: dict = TRUTH_OBS, max_t: int = 2000) -> tuple[list[UnitHistory], dict]:
+def synth_units_observable(n: int, seed: int, truth: dict = TRUTH_OBS,
+                           max_t: int = 2000) -> tuple[list[UnitHistory], dict]:
     """n units whose failure is defined on the *measured* HI: the first mission whose HI record reaches the
     unit's level Y_i ~ N(Y0, sY^2) (as NASA's capacity or Virkler's crack length); AR(1) HI noise, so a unit's
     measurement runs persistently ahead of or behind its smooth path. Records before that mission are kept."""
