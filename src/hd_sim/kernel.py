@@ -48,9 +48,11 @@ The explicit step updates z and y_FS' both from the old state: on the unloading
 branch (slope A) that pair is a forward-Euler oscillator, amplified by
 sqrt(1 + A dt^2/m_FSy) ~ 1.28 per 25 us step at A_ratio 4; the mesh damping c_m
 hides it while the teeth are in contact, but inside a backlash dead zone the
-flexspline rings up within a millisecond, z leaves +-z_max and the run
-diverges (docs/FAMILIES.md, "Bouc-Wen step"). Logged accelerations are the ones computed from the logged
-forces at the same instant, so r1..r4 hold to rounding on ``/sim/internal``.
+flexspline rings up within a few ms, z leaves +-z_max and the run can
+diverge (docs/FAMILIES.md, "Bouc-Wen step").
+
+Logged accelerations are the ones computed from the logged forces at the same
+instant, so r1..r4 hold to rounding on ``/sim/internal``.
 
 Mid-mission fault (``flt_*``, built by :func:`hd_sim.plant.fault_vector`):
 from internal step ``flt_n_on`` on (``< 0``: no fault) the fault fraction
