@@ -48,7 +48,7 @@ def _row(ms):
     return out
 
 
-def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, label):
+def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, label, level=None):
     """Leave-one-unit-out: life model (grid posterior) and UKF on it; units with a failure are scored."""
     from hd_prognostic.lifemodel import LifeModel, UnitEvents, predict_history
 
@@ -59,10 +59,11 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         t0 = time.perf_counter()
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
-                          seed=seed)
+                          seed=seed, threshold=THRESHOLD[0], failure_level=level)
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
+        sg["threshold"] = m.threshold
         per_grid.append(sg)
         per_ukf.append(su)
         per_plug.append(sp)
@@ -70,12 +71,14 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
             print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" / {su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
-                  f"{sp['coverage_p5_p95']:.2f} (ESS {m.fit_info['parameter_uncertainty'].get('ess', 0):.0f})"
+                  f"{sp['coverage_p5_p95']:.2f} (ESS {m.fit_info['parameter_uncertainty'].get('ess', 0):.0f}, "
+                  f"threshold {m.threshold})"
                   f"  [{time.perf_counter() - t0:.1f} s]", flush=True)
     return per_grid, per_ukf, per_plug
 
 
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
+THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
 
 
 def _predict_all(m, test, eol, samples, seed):
@@ -122,7 +125,7 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
             us = [unit_history(a, args.feature, e) for a in fleet]
             attach_events(us, ev)
             cands[e] = us
-        best = fit_best(cands, feature=args.feature, n_draws=0)
+        best = fit_best(cands, feature=args.feature, n_draws=0, threshold=THRESHOLD[0])
         exposure = best.exposure
         res["exposure_choice"] = best.fit_info["exposure_candidates"]
         print(f"{name}: exposure by maximum likelihood on all of {name}: {exposure} "
@@ -193,14 +196,14 @@ def events_fleet(name, fleet_dir, exposure, args):
             "reference_name": "- (no wear truth in these bags)"}
 
 
-def csv_dataset(name, hi, events, args):
+def csv_dataset(name, hi, events, args, level=None):
     from hd_prognostic.lifemodel import attach_events, read_events, read_hi_csv
 
     units = read_hi_csv(hi)
     ev = read_events(events)
     attach_events(units, ev, str(events))
     eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
-    g, u, pl = _louo(units, eols, "csv exposure", "step", "hi", args.samples, args.seed, True, name)
+    g, u, pl = _louo(units, eols, "csv exposure", "step", "hi", args.samples, args.seed, True, name, level)
     return {"exposure": "time column", "life": g, "ukf": u, "plugin": pl}
 
 
@@ -221,10 +224,17 @@ def main(argv=None) -> int:
     ap.add_argument("--particles", type=int, default=1000, help="reference PF particles")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--draws", type=int, default=20, help="posterior parameter draws per life-model fit")
+    ap.add_argument("--threshold", default="auto", choices=("auto", "latent", "observable"),
+                    help="failure threshold on the latent state, on the observable HI, or chosen by maximum "
+                         "likelihood in every fit (training units only)")
+    ap.add_argument("--no-known-level", dest="known_level", action="store_false",
+                    help="NASA / Virkler: fit the observable threshold's level instead of taking it from the failure "
+                         "definition (80 %% of rated capacity, 49.8 mm)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--no-reference", action="store_true")
     args = ap.parse_args(argv)
     DRAWS[0] = args.draws
+    THRESHOLD[0] = args.threshold
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
@@ -245,21 +255,23 @@ def main(argv=None) -> int:
         results[n] = events_fleet(n, d, exposure or "load", args)
         results[n]["seconds"] = time.perf_counter() - t0
     if args.nasa:
-        from hd_prognostic.realdata import battery_records, run_battery
+        from hd_prognostic.realdata import RATED_AH, battery_records, run_battery
 
         t0 = time.perf_counter()
         hi, ev = battery_records(args.nasa, out, eol_frac=0.8)
-        results["nasa"] = csv_dataset("nasa", hi, ev, args)
+        # failure defined on the measured capacity: its level (80 % of rated) is the failure definition
+        results["nasa"] = csv_dataset("nasa", hi, ev, args, level=0.8 * RATED_AH if args.known_level else None)
         r = run_battery(args.nasa, eol_fracs=(0.8,), n_particles=args.particles, seed=args.seed)
         results["nasa"]["reference"] = [dict(u["metrics"], unit=k) for k, u in r["units"].items()]
         results["nasa"]["reference_name"] = "exponential-fade PF, leave-one-cell-out prior (realdata.run_battery)"
         results["nasa"]["seconds"] = time.perf_counter() - t0
     if args.virkler:
-        from hd_prognostic.realdata import run_virkler, virkler_records
+        from hd_prognostic.realdata import VIRKLER_LENGTHS_MM, run_virkler, virkler_records
 
         t0 = time.perf_counter()
         hi, ev = virkler_records(args.virkler, out)
-        res = csv_dataset_every("virkler", hi, ev, args)
+        res = csv_dataset_every("virkler", hi, ev, args,  # failure defined as the measured length reaching 49.8 mm
+                                level=VIRKLER_LENGTHS_MM[-1] * 1e-3 if args.known_level else None)
         r = run_virkler(args.virkler, n_particles=args.particles, seed=args.seed)
         scored = {m["unit"] for m in res["life"]}  # the same specimens as the life model's rows
         res["reference"] = [dict(u["metrics"], unit=f"specimen{k}") for k, u in r["units"].items()
@@ -272,18 +284,19 @@ def main(argv=None) -> int:
         table[n] = {"life model": _row(r["life"]), "UKF on it": _row(r["ukf"]), "plug-in": _row(r.get("plugin", [])),
                     "threshold bound": float(np.mean(list(r["bound"].values()))) if r.get("bound") else None,
                     "reference": _row(r.get("reference", [])), "exposure": r.get("exposure"),
-                    "reference_name": r.get("reference_name"), "seconds": r.get("seconds")}
+                    "reference_name": r.get("reference_name"), "seconds": r.get("seconds"),
+                    "threshold": _thr(r["life"])}
     (out / "bench_prognostics.json").write_text(json.dumps({"table": table, "results": results}, indent=1,
                                                            default=lambda o: float(o) if np.isscalar(o) else str(o)))
     print()
-    print("| dataset | units scored | clock | life model: in-cone / P5-P95 cov / CRA / CRPS | UKF on it | "
+    print("| dataset | units scored | clock | threshold (folds) | life model: in-cone / P5-P95 cov / CRA / CRPS | UKF on it | "
           "plug-in point estimate (no parameter draws) | reference | reference model | "
           "in-cone bound (true wear, population threshold) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for n, t in table.items():
         f = lambda r: (f"{r['frac_in_cone_lambda_ge_0.5']:.2f} / {r['coverage_p5_p95']:.2f} / {r['cra']:.2f} / "
                        f"{r['crps_mean']:.3g}" if r["n"] else "-")
-        print(f"| {n} | {t['life model']['n']} | {t['exposure']} | {f(t['life model'])} | {f(t['UKF on it'])} | "
+        print(f"| {n} | {t['life model']['n']} | {t['exposure']} | {t['threshold']} | {f(t['life model'])} | {f(t['UKF on it'])} | "
               f"{f(t['plug-in'])} | "
               f"{f(t['reference'])} | {t['reference_name'] or '-'} | "
               f"{'-' if t['threshold bound'] is None else format(t['threshold bound'], '.2f')} |")
@@ -291,7 +304,13 @@ def main(argv=None) -> int:
     return 0
 
 
-def csv_dataset_every(name, hi, events, args):
+def _thr(rows):
+    """Which threshold the folds' fits chose, e.g. 'observable 3/3'."""
+    ks = [r.get("threshold") for r in rows if r.get("threshold")]
+    return ", ".join(f"{k} {ks.count(k)}/{len(ks)}" for k in dict.fromkeys(ks)) or "-"
+
+
+def csv_dataset_every(name, hi, events, args, level=None):
     """csv_dataset, scoring every k-th unit (``--virkler-every``) while each fit uses all the others."""
     from hd_prognostic.lifemodel import attach_events, read_events, read_hi_csv
 
@@ -302,11 +321,11 @@ def csv_dataset_every(name, hi, events, args):
     k = max(1, args.virkler_every)
     scored = {u.unit for u in units[::k]}
     keep = {u: t for u, t in eols.items() if u in scored}
-    g, u, pl = _louo_subset(units, keep, args, name)
+    g, u, pl = _louo_subset(units, keep, args, name, level)
     return {"exposure": "time column", "life": g, "ukf": u, "plugin": pl, "scored_every": k}
 
 
-def _louo_subset(units, eols, args, name):
+def _louo_subset(units, eols, args, name, level=None):
     """Leave-one-unit-out scoring the units in ``eols`` only (each fit uses all the other units)."""
     from hd_prognostic.lifemodel import LifeModel, UnitEvents
 
@@ -316,17 +335,19 @@ def _louo_subset(units, eols, args, name):
             continue
         t0 = time.perf_counter()
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
-                          time_unit="step", n_draws=DRAWS[0], seed=args.seed)
+                          time_unit="step", n_draws=DRAWS[0], seed=args.seed, threshold=THRESHOLD[0],
+                          failure_level=level)
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
+        sg["threshold"] = m.threshold
         per_grid.append(sg)
         per_ukf.append(su)
         per_plug.append(sp)
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
-              f"{sp['coverage_p5_p95']:.2f}  [{time.perf_counter() - t0:.1f} s]", flush=True)
+              f"{sp['coverage_p5_p95']:.2f} (threshold {m.threshold})  [{time.perf_counter() - t0:.1f} s]", flush=True)
     return per_grid, per_ukf, per_plug
 
 

@@ -5,7 +5,9 @@ delegate to the core and publish what it produced. Subscriptions take raw CDR an
 whole queue per callback, so the core sees blocks (``hd_ros.convert.take_all``). The twin state is
 read by :func:`hd_twin.state.read_state`, window features are computed off the flag path by
 :class:`hd_onboard.windowpool.WindowFeaturePool`, the diagnostics' content comes from
-:mod:`hd_onboard.status`.
+:mod:`hd_onboard.status`, when rows / features / diagnostics go out (and the STALE watchdog) from
+:class:`hd_onboard.publishing.PublishSchedule`; ``rt_thread`` puts joint states on their own thread
+(:class:`hd_ros.rtthread.RtSubscription`).
 
 Subscribes: ``/hd/joint_states``, ``/hd/command``, ``/hd/temperature``
 (sensor QoS), ``/hd/mission`` (JSON ``hd_mission`` metadata, latched: a new
@@ -26,25 +28,24 @@ joint-state time advanced ``stale_timeout_s`` past their last sample).
 from __future__ import annotations
 
 import dataclasses
-import math
 import threading
 import time
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.node import Node
 from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64MultiArray, String
 
 import hd_ros as ru
 from hd_onboard.config import OnboardConfig
-from hd_onboard.detectors.levels import LEVEL_NAMES, OK
+from hd_onboard.detectors.levels import LEVEL_NAMES
+from hd_onboard.publishing import InputBook, PublishSchedule, window_table
 from hd_onboard.residuals import CHANNELS, RESIDUAL_COLUMNS
 from hd_onboard.session import OnboardSession
 from hd_onboard.status import onboard_statuses
 from hd_onboard.windowpool import WindowFeaturePool
 from hd_ros.managed import ManagedNode, bring_up
+from hd_ros.rtthread import RtSubscription
 from hd_twin import state as sv
 
 NODE_NAME = "onboard"
@@ -79,53 +80,46 @@ class OnboardNode(ManagedNode):
         self._pool = None
 
     def configure(self):
-        cfg = OnboardConfig(**{k: self.p[k] for k in OnboardConfig.__dataclass_fields__ if k in self.p}).validate()
+        p = self.p
+        cfg = OnboardConfig(**{k: p[k] for k in OnboardConfig.__dataclass_fields__ if k in p}).validate()
         #: this actuator's monitoring: core, twin, lines, references, mission metadata (hd_onboard.session)
-        self.session = OnboardSession(cfg, self.p["model_dir"], self.p["gear_ratio"], self.p["actuator_id"] or "",
+        self.session = OnboardSession(cfg, p["model_dir"], p["gear_ratio"], p["actuator_id"] or "",
                                       log=lambda s: self.get_logger().warning(s))
-        self.n_msgs = {t: 0 for t in ru.CONTRACT_TOPICS}  # decoded messages
-        self.n_taken = {t: 0 for t in ru.CONTRACT_TOPICS}  # messages taken from DDS (decodable or not)
+        #: when to publish what (hd_onboard.publishing); input counts of the reports
+        self.schedule = PublishSchedule(p["diag_period_s"], p["residual_rows"], p["stale_timeout_s"], time.monotonic())
+        self.book = InputBook(ru.CONTRACT_TOPICS)
+        self.n_msgs, self.n_taken, self.last_wall, self.last_stamp = (
+            self.book.n_msgs, self.book.n_taken, self.book.last_wall, self.book.last_stamp)
         self.n_mission_msgs = 0  # /hd/mission messages taken
-        self.n_bad = 0
-        self.last_wall = {t: None for t in ru.CONTRACT_TOPICS}
-        self.last_stamp = {t: None for t in ru.CONTRACT_TOPICS}
-        self.last_diag_t = -math.inf
-        self.level = OK
-        self._stale = False
         self.latency_s: list[float] = []  # arrival -> flag decision, per block (bench)
         self.n_published = {ru.TOPIC_RESIDUALS: 0, ru.TOPIC_FEATURES: 0, ru.TOPIC_DIAGNOSTICS: 0}
         self.errors: list[str] = []
         self.input_problems: list[tuple[str, int, str]] = []  # (key, level, message): OnboardCore input notes
         self.latency_ns: list[int] = []  # latency_probe: per sample, decision wall time - header.stamp
         self.flags: list[tuple[str, int, int, str]] = []  # (actuator, stamp_ns, level, reason)
-        self._pool = WindowFeaturePool(threaded=bool(self.p["feature_thread"]))
+        self._pool = WindowFeaturePool(threaded=bool(p["feature_thread"]))
         self.pub_res = self.create_publisher(Float64MultiArray, ru.TOPIC_RESIDUALS, ru.topic_qos(ru.TOPIC_RESIDUALS))
         self.pub_feat = self.create_publisher(Float64MultiArray, ru.TOPIC_FEATURES, ru.topic_qos(ru.TOPIC_FEATURES))
         self.pub_diag = self.create_publisher(DiagnosticArray, ru.TOPIC_DIAGNOSTICS, ru.qos("diagnostics"))
         self._lock = threading.RLock()  # the core is shared by the joint-state thread and the others
-        if self.p["rt_thread"]:
-            # joint states alone in a wait set (a few entities instead of all the node's): the executor's
-            # per-wake cost, not the core, dominates the arrival -> flag latency at 1 kHz
-            self._rt_node = Node(NODE_NAME + "_rt", context=self.context, start_parameter_services=False)
-            self.sub_js = self._rt_node.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js_rt,
-                                                            ru.qos("sensor"), raw=True)
-            self._rt_exec = ru.make_executor(self.context)
-            self._rt_exec.add_node(self._rt_node)
-            self._rt_stop = threading.Event()
-            self._rt = threading.Thread(target=self._rt_spin, name="onboard-joint-states", daemon=True)
+        if p["rt_thread"]:  # joint states alone in a wait set, on their own thread (hd_ros.rtthread)
+            self._rt = RtSubscription(self.context, NODE_NAME + "_rt", JointState, ru.TOPIC_JOINT_STATES, self._on_js,
+                                      ru.qos("sensor"), priority=int(p["rt_priority"]), gate=lambda: self.is_active,
+                                      lock=self._lock, raw=True, thread_name="onboard-joint-states", label="joint-state",
+                                      log=lambda lev, text: getattr(self.get_logger(), lev)(text))
+            self.sub_js = self._rt.sub
         else:
             self.sub_js = self.create_subscription(JointState, ru.TOPIC_JOINT_STATES, self._on_js, ru.qos("sensor"), raw=True)
         self.sub_cmd = self.create_subscription(JointState, ru.TOPIC_COMMAND, self._locked(self._on_cmd), ru.qos("sensor"), raw=True)
         self.sub_tmp = self.create_subscription(Temperature, ru.TOPIC_TEMPERATURE, self._locked(self._on_temp), ru.qos("sensor"), raw=True)
         self.sub_mission = self.create_subscription(String, ru.TOPIC_MISSION, self._on_mission_msg, ru.mission_sub_qos())
-        self._t_start = time.monotonic()
         self.create_subscription(String, ru.TOPIC_TWIN_STATE, self._locked(self._on_twin), ru.qos("latched"))
-        self.create_timer(max(0.1, self.p["stale_timeout_s"] / 4), self._locked(self._on_timer))
+        self.create_timer(max(0.1, p["stale_timeout_s"] / 4), self._locked(self._on_timer))
         self._new_core()
         self.get_logger().info(f"onboard up: twin={self.core.expected.kind} {self.core.expected.version}")
         ru.contain_callbacks(self, "hdphm/onboard")  # no exception of a callback stops the node
         if self._rt is not None:
-            ru.contain_callbacks(self._rt_node, "hdphm/onboard")
+            self._rt.contain("hdphm/onboard")
             self._rt.start()
 
     def _locked(self, fn):
@@ -135,27 +129,6 @@ class OnboardNode(ManagedNode):
 
         return run
 
-    # ---- the joint-state thread (rt_thread) -------------------------------------------------------
-    def _rt_spin(self):
-        prio = int(self.p["rt_priority"])
-        if prio:
-            why = ru.set_thread_realtime(prio)
-            if why:
-                self.get_logger().warning(f"joint-state thread not real-time: {why}")
-        while not self._rt_stop.is_set() and self.context.ok():
-            try:
-                self._rt_exec.spin_once(timeout_sec=0.1)
-            except Exception as e:  # noqa: BLE001 - shutdown races end the thread quietly
-                if not self._rt_stop.is_set() and self.context.ok():
-                    self.get_logger().error(f"joint-state thread: {type(e).__name__}: {e}")
-                return
-
-    def _on_js_rt(self, first):
-        if not self.is_active:  # the joint-state thread's own node is not gated by the lifecycle
-            return
-        with self._lock:
-            self._on_js(first)
-
     # ---- the session's state, as attributes (tests, the stack's summary) ---------------------------
     core = property(lambda self: self.session.core)
     meta = property(lambda self: self.session.meta)
@@ -164,16 +137,16 @@ class OnboardNode(ManagedNode):
     references_all = property(lambda self: self.session.references_all)
     twin_params = property(lambda self: self.session.twin_params)
     twin_state = property(lambda self: self.session.twin_state)
+    level = property(lambda self: self.schedule.level)  # the level last published
 
-    # ---- core and mission -------------------------------------------------------------------------
+    # ---- core, mission, twin state ------------------------------------------------------------------
     def _new_core(self, why: str | None = None):
         """After the session started a core (``why``: its twin fell back): report, reset the published level."""
         why = self.session.new_core() if why is None else why
         if why:
             self.input_problems.append(("twin_load", 2, why))
             self._error(why)
-        self.last_diag_t = -math.inf
-        self.level = OK
+        self.schedule.reset()
 
     def _on_mission_msg(self, msg):
         self.n_mission_msgs += 1
@@ -188,9 +161,8 @@ class OnboardNode(ManagedNode):
             self.get_logger().debug(f"mission {meta.get('mission_index')} of {self.hardware_id}: core reset")
 
     def _poll_mission(self):
-        sub = self.sub_mission
-        with sub.handle:
-            r = sub.handle.take_message(sub.msg_type, sub.raw)
+        with self.sub_mission.handle:
+            r = self.sub_mission.handle.take_message(self.sub_mission.msg_type, self.sub_mission.raw)
         if r is not None:
             self._on_mission_msg(r[0])
 
@@ -205,7 +177,7 @@ class OnboardNode(ManagedNode):
     def _close_windows(self):
         self._flush_rows()
         self.core.flush()
-        self._submit_windows(final=True)
+        self._pool.submit(self.core.take_window_jobs(), self.core.feature_fn, self.meta.get("mission_index"), True)
         self._publish_windows(wait=True)
 
     def _on_twin(self, msg):
@@ -220,60 +192,57 @@ class OnboardNode(ManagedNode):
             self._new_core(why)
         self.get_logger().info(f"twin state revision {st.get('revision')} applied")
 
-    # ---- inputs -----------------------------------------------------------------------------------
+    # ---- inputs: decode (hd_ros), count (InputBook), push (OnboardSession) ----------------------------
     def _on_js(self, first):
         t_arrival = time.perf_counter()
         msgs = ru.take_all(self.sub_js, first)
-        self.n_taken[ru.TOPIC_JOINT_STATES] += len(msgs)
-        short = int(self.p["short_path_max"])
+        book, short = self.book, int(self.p["short_path_max"])
+        book.n_taken[ru.TOPIC_JOINT_STATES] += len(msgs)
         stamps, V, frame, problems = ru.decode_joint_states(msgs, vectorise_min=short + 1)
         for e in problems:
-            self.n_bad += 1
-            if self.n_bad <= 3:
+            if book.bad():
                 self._error(f"{ru.TOPIC_JOINT_STATES}: {e}")
         if not self.meta:  # a (re)started node: the latched mission may be queued behind the samples
             self._poll_mission()
         if not self.hardware_id and frame:
             self.session.hardware_id = frame
-        n_ok = len(stamps)
-        self.n_msgs[ru.TOPIC_JOINT_STATES] += n_ok
-        self.last_wall[ru.TOPIC_JOINT_STATES] = time.monotonic()
-        self.session.push_samples(stamps, V, short, int(self.p["max_block"]), lambda: self.level,
+        book.n_msgs[ru.TOPIC_JOINT_STATES] += len(stamps)
+        book.last_wall[ru.TOPIC_JOINT_STATES] = time.monotonic()
+        self.session.push_samples(stamps, V, short, int(self.p["max_block"]), lambda: self.schedule.level,
                                   lambda: self._after_samples(force_rows=True),
                                   self.latency_ns if self.p["latency_probe"] else None)
-        core = self.core
-        if n_ok:
-            self.last_stamp[ru.TOPIC_JOINT_STATES] = int(core.last_ns) if core.last_ns is not None else None
+        if len(stamps):
+            book.last_stamp[ru.TOPIC_JOINT_STATES] = int(self.core.last_ns) if self.core.last_ns is not None else None
         self._after_samples()
         self.latency_s.append(time.perf_counter() - t_arrival)
 
     def _on_cmd(self, first):
         msgs = ru.take_all(self.sub_cmd, first)
-        self.n_taken[ru.TOPIC_COMMAND] += len(msgs)
+        self.book.n_taken[ru.TOPIC_COMMAND] += len(msgs)
         stamps, V, _, problems = ru.decode_joint_states(msgs)  # column 0: position[0] = theta_ref
         for e in problems:
             self._error(f"{ru.TOPIC_COMMAND}: {e}")
-        self.n_msgs[ru.TOPIC_COMMAND] += len(stamps)
+        self.book.n_msgs[ru.TOPIC_COMMAND] += len(stamps)
         if len(stamps):
-            self.last_stamp[ru.TOPIC_COMMAND] = int(stamps[-1])
+            self.book.last_stamp[ru.TOPIC_COMMAND] = int(stamps[-1])
         self.session.push_commands(stamps, V)
-        self.last_wall[ru.TOPIC_COMMAND] = time.monotonic()
+        self.book.last_wall[ru.TOPIC_COMMAND] = time.monotonic()
 
     def _on_temp(self, first):
         msgs = ru.take_all(self.sub_tmp, first)
-        self.n_taken[ru.TOPIC_TEMPERATURE] += len(msgs)
+        self.book.n_taken[ru.TOPIC_TEMPERATURE] += len(msgs)
         for b in msgs:
             try:
                 s, frame, v = ru.decode_temperature(b)
             except ru.CdrError as e:
                 self._error(f"{ru.TOPIC_TEMPERATURE}: {e}")
                 continue
-            self.n_msgs[ru.TOPIC_TEMPERATURE] += 1
-            self.last_stamp[ru.TOPIC_TEMPERATURE] = s
+            self.book.n_msgs[ru.TOPIC_TEMPERATURE] += 1
+            self.book.last_stamp[ru.TOPIC_TEMPERATURE] = s
             self.session.push_temperature(s, frame, v)
-        self.last_wall[ru.TOPIC_TEMPERATURE] = time.monotonic()
+        self.book.last_wall[ru.TOPIC_TEMPERATURE] = time.monotonic()
 
-    # ---- outputs ----------------------------------------------------------------------------------
+    # ---- outputs: what and when decided by PublishSchedule ------------------------------------------
     def _after_samples(self, force_rows: bool = False):
         """Publish what the core produced: flags first, then rows, diagnostics, windows."""
         core = self.core
@@ -281,16 +250,13 @@ class OnboardNode(ManagedNode):
         for s, lev, why in core.take_events():
             self.flags.append((self.hardware_id, s, lev, why))
             self.get_logger().warning(f"{self.hardware_id}: {LEVEL_NAMES[lev]} at stamp {s * 1e-9:.3f} s ({why})")
-        t_now = core.last_ns * 1e-9 if core.last_ns is not None else 0.0
-        changed = core.level != self.level
-        if changed or t_now - self.last_diag_t >= self.p["diag_period_s"]:
-            self.level = core.level
-            self.last_diag_t = t_now
+        report, rows = self.schedule.after_samples(core.level, core.last_ns, len(core.rows), force_rows)
+        if report:
             self._publish_status()
-        if changed or force_rows or len(core.rows) >= int(self.p["residual_rows"]):
+        if rows:
             self._flush_rows()
         if core.window_jobs:
-            self._submit_windows()
+            self._pool.submit(core.take_window_jobs(), core.feature_fn, self.meta.get("mission_index"), False)
         if len(self._pool):
             self._publish_windows()
 
@@ -300,16 +266,11 @@ class OnboardNode(ManagedNode):
             self.pub_res.publish(ru.pack_table(RESIDUAL_COLUMNS, tab))
             self.n_published[ru.TOPIC_RESIDUALS] += 1
 
-    def _submit_windows(self, final: bool = False):
-        """The core's closed windows to the feature pool (``final``: the last one ends the mission)."""
-        self._pool.submit(self.core.take_window_jobs(), self.core.feature_fn, self.meta.get("mission_index"), final)
-
     def _publish_windows(self, wait: bool = False):
         """Finished window rows (in window order) to ``/hd/onboard/features``."""
         rows = self._pool.drain(wait, lambda e: self.get_logger().error(f"window features failed: {type(e).__name__}: {e}"))
         if rows:
-            keys = sorted({k for w in rows for k in w})
-            self.pub_feat.publish(ru.pack_table(keys, np.array([[float(w.get(k, math.nan)) for k in keys] for w in rows])))
+            self.pub_feat.publish(ru.pack_table(*window_table(rows)))
             self.n_published[ru.TOPIC_FEATURES] += 1
 
     def _report_input(self):
@@ -331,10 +292,9 @@ class OnboardNode(ManagedNode):
         self._publish_diag([("hdphm/onboard/input", 2, text[:200], self.hardware_id or "unknown", {})])
 
     def _publish_status(self, stale_js: bool = False):
-        if not self.hardware_id and time.monotonic() - self._t_start < self.p["stale_timeout_s"]:
-            return  # neither /hd/mission nor a frame_id named the actuator yet: no status under "unknown"
-        self._publish_diag(onboard_statuses(self.core, self.meta, self.hardware_id, self.n_msgs, self.last_stamp,
-                                            self.n_bad, stale_js, self.p["stale_timeout_s"]))
+        if self.schedule.may_report(self.hardware_id, time.monotonic()):
+            self._publish_diag(onboard_statuses(self.core, self.meta, self.hardware_id, self.book.n_msgs, self.book.last_stamp,
+                                                self.book.n_bad, stale_js, self.p["stale_timeout_s"]))
 
     def _publish_diag(self, statuses):
         self.pub_diag.publish(ru.diag_array(self, [ru.diag_status(*s) for s in statuses]))
@@ -345,21 +305,15 @@ class OnboardNode(ManagedNode):
             self._flush_rows()
         if len(self._pool):
             self._publish_windows()
-        lw = self.last_wall[ru.TOPIC_JOINT_STATES]
-        if lw is not None and time.monotonic() - lw > self.p["stale_timeout_s"]:
-            if not self._stale:
-                self._stale = True
-                self._close_windows()
+        close, stale = self.schedule.watchdog(self.book.last_wall[ru.TOPIC_JOINT_STATES], time.monotonic())
+        if close:
+            self._close_windows()
+        if stale:
             self._publish_status(stale_js=True)
-        else:
-            self._stale = False
 
     def release(self):
         if self._rt is not None:
-            self._rt_stop.set()
-            self._rt.join(timeout=2.0)
-            self._rt_exec.shutdown()
-            self._rt_node.destroy_node()
+            self._rt.stop()
             self._rt = None
         if self._pool is not None:
             self._pool.close()

@@ -280,13 +280,15 @@ def _fit_life(args) -> int:
                                               cache=args.cache, workers=args.workers, progress=True)
     for n in dict.fromkeys(notes):
         print(f"note: {n}", file=sys.stderr)
-    m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws)
+    m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws, threshold=args.threshold,
+                 failure_level=args.failure_level)
     m.to_json(args.out)
     fi = m.fit_info
     print(json.dumps({"exposure": m.exposure, "E_ref": m.E_ref, **m.to_json()["readable"],
                       "inspections": m.inspections, "log_likelihood": fi["log_likelihood"],
                       "units": fi["n_units"], "failures": fi["n_failures"], "censored": fi["n_censored"],
                       "exposure_candidates": fi.get("exposure_candidates"),
+                      "threshold_candidates": fi.get("threshold_candidates"),
                       "parameter_draws": len(m.draws),
                       "parameter_draws_ess": fi.get("parameter_uncertainty", {}).get("ess")}, indent=1, default=float))
     print(f"wrote {args.out}")
@@ -412,6 +414,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=1, help="processes for reading the bags")
     p.add_argument("--draws", type=int, default=20,
                    help="posterior draws of the population parameters mixed by the prognosis (0: point estimate)")
+    p.add_argument("--threshold", choices=("auto", "latent", "observable"), default="auto",
+                   help="failure threshold on the latent degradation or on the measured HI; auto: the "
+                        "maximum-likelihood one (same parameter count, so also the AIC choice)")
+    p.add_argument("--failure-level", type=float, default=None, metavar="HI",
+                   help="when failure is defined as the measured HI reaching a known level (e.g. 1.6 Ah, 0.0498 m): "
+                        "that level, the observable threshold's median (not fitted then)")
     p.set_defaults(func=_guard(_fit_life))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")

@@ -20,6 +20,10 @@ Model (latent degradation path, population of units):
   fixes the latent scale; ``c`` is the HI change at the median threshold);
 * inspection of quantity q: ``v = alpha_q + beta_q L_i + N(0, tau_q^2)`` (population-level map, fitted
   when the quantity has >= 4 inspections in the fleet; otherwise ignored with a note).
+* or (``threshold="observable"``) failure when the *measured* HI crosses the unit's level ``Y_i ~ N(Y0, s_Y^2)``
+  in the direction of ``c`` (failure defined on a measurement: capacity fraction, crack length, a lost-motion
+  limit); the latent scale is then fixed by ``mu = 0``. ``threshold="auto"`` fits both and keeps the higher
+  maximum likelihood (same number of parameters: also the AIC choice); never chosen per scored unit.
 
 Likelihood of unit i (exact up to a 1-D quadrature over ``z = ln r_i``, on an adaptive grid):
 ``p_i = int N(z; mu, s) p(y_i | z) prod_insp p(v | z) P(event | z) dz`` with
@@ -28,8 +32,18 @@ it failed between its last record and the mission it was found failed at) and
 ``P(survive to E_c | z) = Phi(-(z + b ln E_c)/s_D)``. All parameters by maximum likelihood (L-BFGS-B, then a
 short Nelder-Mead polish, on the summed log marginal likelihood, started from per-unit least squares).
 
-Prognosis of one unit at time t_k: the posterior over z on the same grid (its HI and inspections up to t_k,
-survival to ``E(t_k)``), then ``ln D`` from its prior truncated to ``ln D > z + b ln E(t_k)``, the failure
+Observable threshold (given z, the offset's conditional law given the record is normal, so the event terms stay
+closed-form): ``P(failure) = P(M < Y <= y_f) ~ Phi((m_f - Y0)/sqrt(s_Y^2 + v_f)) - Phi((M - Y0)/s_Y)`` (oriented by
+the sign of c), ``y_f ~ N(m_f, v_f)`` the unrecorded HI at the failure time (offset posterior, AR(1) residual carried
+on from the last record), M the record's extreme; censored: ``P(Y > M)``. Its prognosis simulates the unit's future
+HI records from its posterior until they pass a threshold drawn from its law truncated to ``Y > M``.
+
+Parameter draws: uniform prior on the standard deviations with >= 3 failures (Gelman 2006's default); with 2, where
+that posterior is improper, half-Cauchy priors on the between-unit scales (``s``: scale 1, ``s_a`` and ``s_Y``: the
+HI's standard deviation over the training records, ``s_D``: 1), Gelman's recommendation for few groups.
+
+Prognosis of one unit at time t_k (latent threshold): the posterior over z on the same grid (its HI and inspections
+up to t_k, survival to ``E(t_k)``), then ``ln D`` from its prior truncated to ``ln D > z + b ln E(t_k)``, the failure
 exposure ``E_f = E_ref (D / r)^(1/b)`` and the failure time from the unit's own exposure rate.
 """
 
@@ -47,6 +61,7 @@ from scipy import optimize, special
 EVENT_KINDS = ("failure", "removal", "inspection")
 EVENT_COLUMNS = ("actuator_id", "mission_index", "event", "quantity", "value")
 EXPOSURES = ("missions", "hours", "load")
+THRESHOLDS = ("latent", "observable")  # where the failure threshold sits (LifeModel.fit(threshold=...))
 MIN_INSPECTIONS = 4  # per quantity, fleet-wide, to fit its (alpha, beta, tau) map
 _LOG2PI = math.log(2 * math.pi)
 
@@ -318,6 +333,21 @@ class _Batch:
                     tc = ev.removal if ev.removal is not None else u.t[-1]
                 ec = u.exposure_at(tc) / E_ref
                 self.lcens[i] = math.log(ec) if ec > 0 else -np.inf
+        # observable threshold: last finite record (value, log exposure), running max / min of the record, and
+        # the number of record steps from it to the failure (discrete: time steps; continuous: the next record)
+        self.y_last, self.lx_last, self.ymax, self.ymin = (np.full(self.U, np.nan) for _ in range(4))
+        self.nf = np.ones(self.U)
+        for i, u in enumerate(units):
+            ok = np.flatnonzero(np.isfinite(u.y))
+            if not len(ok):
+                continue
+            j = ok[-1]
+            self.y_last[i] = u.y[j]
+            with np.errstate(divide="ignore"):
+                self.lx_last[i] = math.log(u.E[j] / E_ref) if u.E[j] > 0 else -np.inf
+            self.ymax[i], self.ymin[i] = np.max(u.y[ok]), np.min(u.y[ok])
+            if np.isfinite(self.lhi[i]) and u.discrete:
+                self.nf[i] = max(1.0, float(u.events.failure - u.t[j]))
         self.idx = np.concatenate(idx).astype(int)
         self.y = np.concatenate(ys)
         self.lx = np.concatenate(lx)
@@ -354,7 +384,7 @@ class _Batch:
         """log of prior(z) p(y|z) p(insp|z) P(event|z), z of shape (U, n)."""
         rho = math.tanh(th.get("atanh_rho", 0.0))
         self.set_b(b, rho)
-        s, sa, sig, sD = (math.exp(th[k]) for k in ("log_s", "log_sa", "log_sigma", "log_sD"))
+        s, sa, sig, sD = (math.exp(th.get(k, 0.0)) for k in ("log_s", "log_sa", "log_sigma", "log_sD"))
         mu, c, a0 = th["mu"], th["c"], th["a0"]
         r = np.exp(z)
         f = -0.5 * ((z - mu) / s) ** 2 - math.log(s) - 0.5 * _LOG2PI
@@ -379,6 +409,8 @@ class _Batch:
             term = -0.5 * ((self.qv[sel, None] - m["alpha"] - m["beta"] * r[rows] * self.qX[sel, None]) / tau) ** 2 \
                 - math.log(tau) - 0.5 * _LOG2PI
             np.add.at(f, rows, term)
+        if "log_sY" in th:  # failure threshold on the observable HI
+            return f + self._obs_event_terms(z, r, th, b, rho, sa, sig, c, a0)
         fl = np.isfinite(self.lhi)
         if fl.any():
             f[fl] += _log_diff_ndtr((z[fl] + b * self.llo[fl, None]) / sD, (z[fl] + b * self.lhi[fl, None]) / sD)
@@ -386,6 +418,43 @@ class _Batch:
         if ce.any():
             f[ce] += special.log_ndtr(-(z[ce] + b * self.lcens[ce, None]) / sD)
         return f
+
+    def a_post(self, r: np.ndarray, th: dict, b: float) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior mean and variance of the unit offsets ``a_i`` given the HI record and ``r = exp(z)``
+        (conjugate normal: prewhitened regression u = a g + c r x~ + N(0, sigma^2), prior N(a0, s_a^2))."""
+        rho = math.tanh(th.get("atanh_rho", 0.0))
+        self.set_b(b, rho)
+        sa, sig = math.exp(th["log_sa"]), math.exp(th["log_sigma"])
+        prec = 1.0 / sa ** 2 + self.Sgg[:, None] / sig ** 2
+        m = (th["a0"] / sa ** 2 + (self.Sgu[:, None] - th["c"] * r * self.SgX[:, None]) / sig ** 2) / prec
+        return m, np.broadcast_to(1.0 / prec, m.shape)
+
+    def _obs_event_terms(self, z, r, th, b, rho, sa, sig, c, a0) -> np.ndarray:
+        """log P(event | z, HI record) for a threshold Y ~ N(Y0, s_Y^2) on the observable HI (crossed in the
+        direction of c): failure = the unrecorded HI at the failure time, y_f (normal given z: offset posterior,
+        AR(1) residual carried from the last record), is past Y while every record was not, P(M < Y <= y_f)
+        ~ Phi((m_f - Y0) / sqrt(s_Y^2 + v_f)) - Phi((M - Y0) / s_Y) (oriented; M = the record's extreme);
+        censored = P(Y > M)."""
+        out = np.zeros_like(z)
+        sg = 1.0 if c >= 0 else -1.0
+        Y0, sY = th["Y0"], math.exp(th["log_sY"])
+        M = (self.ymax if sg > 0 else -self.ymin)[:, None]
+        fl = np.isfinite(self.lhi)
+        if fl.any():
+            ma, va = self.a_post(r, th, b)
+            ma, va = ma[fl], va[fl]
+            rn = (rho ** self.nf[fl])[:, None]
+            Xf = np.exp(b * self.lhi[fl])[:, None]
+            Xk = np.exp(b * self.lx_last[fl])[:, None]
+            mf = ma * (1 - rn) + c * r[fl] * (Xf - rn * Xk) + rn * self.y_last[fl, None]
+            vf = (1 - rn) ** 2 * va + sig * sig * (1 - rn * rn) / (1 - rho * rho)
+            al = (sg * mf - sg * Y0) / np.sqrt(sY * sY + vf)
+            be = np.broadcast_to((M[fl] - sg * Y0) / sY, al.shape)
+            out[fl] = _log_sub_ndtr(al, be)
+        ce = np.isfinite(self.lcens)
+        if ce.any():
+            out[ce] += special.log_ndtr((sg * Y0 - M[ce]) / sY)
+        return out
 
     def grid(self, th: dict, b: float, insp: dict, n: int = 161, windows: np.ndarray | None = None):
         """Per-unit adaptive grids holding the integrand's mass: (z, log f, dz), shapes (U, n), (U, n), (U,).
@@ -432,6 +501,15 @@ class _Batch:
         return Z, F, Z[:, 1] - Z[:, 0]
 
 
+def _log_sub_ndtr(al: np.ndarray, be: np.ndarray) -> np.ndarray:
+    """log(Phi(al) - Phi(be)), floored at log(1e-300) where al <= be (stable in both tails)."""
+    up = be > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(up, np.exp(special.log_ndtr(-be)) - np.exp(special.log_ndtr(-al)),
+                     special.ndtr(al) - special.ndtr(be))
+        return np.log(np.maximum(d, 1e-300))
+
+
 class _SubBatch(_Batch):
     """A view of some rows of a batch (same arrays, selected units)."""
 
@@ -440,6 +518,8 @@ class _SubBatch(_Batch):
         self.n, self.n_start = base.n[rows], base.n_start[rows]
         self._base, self._rows = base, rows
         self.llo, self.lhi, self.lcens = base.llo[rows], base.lhi[rows], base.lcens[rows]
+        self.y_last, self.lx_last, self.nf = base.y_last[rows], base.lx_last[rows], base.nf[rows]
+        self.ymax, self.ymin = base.ymax[rows], base.ymin[rows]
         self.quantities = base.quantities
         pos = np.full(base.U, -1)
         pos[rows] = np.arange(len(rows))
@@ -551,6 +631,8 @@ class LifeModel:
     """Fitted population parameters + the prognosis on one unit (see the module docstring)."""
 
     PARAMS = ("mu", "log_s", "log_b", "c", "a0", "log_sa", "log_sigma", "log_sD", "atanh_rho")
+    #: observable threshold: mu fixed at 0 (no latent threshold fixes the latent scale); Y0, log_sY its law
+    PARAMS_OBS = ("log_s", "log_b", "c", "a0", "log_sa", "log_sigma", "Y0", "log_sY", "atanh_rho")
 
     def __init__(self, theta: dict, E_ref: float, exposure: str = "missions", feature: str = "hi",
                  inspections: dict | None = None, fit_info: dict | None = None, time_unit: str = "mission",
@@ -573,6 +655,20 @@ class LifeModel:
     def b(self) -> float:
         return math.exp(self.theta["log_b"])
 
+    @property
+    def threshold(self) -> str:
+        """``latent`` or ``observable``: where the failure threshold sits."""
+        return "observable" if "log_sY" in self.theta else "latent"
+
+    def latent_scale(self) -> float:
+        """Factor on ``exp(z) X`` giving the reported degradation (1 = median failure threshold): 1 for the latent
+        threshold; for the observable one the mean path's HI change over the way from the mean offset to the
+        median threshold, c / (Y0 - a0)."""
+        if self.threshold == "latent":
+            return 1.0
+        d = (self.theta["Y0"] - self.theta["a0"]) / self.theta["c"]
+        return 1.0 / d if d > 0 else 1.0
+
     def to_json(self, path=None) -> dict:
         d = {"kind": "hdphm life model v1", "theta": self.theta, "E_ref": self.E_ref, "exposure": self.exposure,
              "feature": self.feature, "inspections": self.inspections, "fit_info": self.fit_info,
@@ -581,7 +677,10 @@ class LifeModel:
                           "shape_b": self.b, "hi_change_at_median_threshold": self.theta["c"],
                           "hi_offset_mean": self.theta["a0"], "hi_offset_std": math.exp(self.theta["log_sa"]),
                           "hi_noise_std": math.exp(self.theta["log_sigma"]),
-                          "threshold_log_std": math.exp(self.theta["log_sD"]),
+                          "threshold": self.threshold,
+                          **({"threshold_log_std": math.exp(self.theta["log_sD"])} if self.threshold == "latent"
+                             else {"threshold_hi_median": self.theta["Y0"],
+                                   "threshold_hi_std": math.exp(self.theta["log_sY"])}),
                           "hi_noise_ar1": math.tanh(self.theta.get("atanh_rho", 0.0))}}
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -615,11 +714,21 @@ class LifeModel:
     @classmethod
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
-            seed: int = 0) -> "LifeModel":
+            seed: int = 0, threshold: str = "latent", failure_level: float | None = None) -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
-        ``n_draws`` posterior draws of the population parameters (:func:`_posterior_draws`; 0: point estimate
-        only) carry the parameter uncertainty of a small fleet into the prognosis."""
+        ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
+        when the measured HI crosses Y_i) or ``auto`` (both fitted, the lower AIC kept, i.e. the higher maximum
+        likelihood when both have 9 population parameters; the log-likelihoods go to
+        ``fit_info["threshold_candidates"]``). ``failure_level``: the HI level that defines failure when the
+        failure definition is on the measured HI and its level is known (NASA: 80 % of rated capacity, Virkler:
+        49.8 mm): the observable threshold's median Y0 is then fixed there (its scatter s_Y still fitted) instead
+        of being estimated from the gap between the last record and the unrecorded value at failure.
+        ``n_draws`` posterior draws of the population parameters
+        (:func:`_posterior_draws`; 0: point estimate only) carry the parameter uncertainty of a small fleet into
+        the prognosis."""
+        if threshold not in THRESHOLDS + ("auto",):
+            raise ValueError(f"life-model fit: threshold {threshold!r} is not one of {', '.join(THRESHOLDS)}, auto")
         units = [u for u in units if len(u.t) >= 2 and np.isfinite(u.y).sum() >= 2]
         if len(units) < 2:
             raise ValueError(f"life-model fit: {len(units)} unit(s) with >= 2 finite health-indicator values; need >= 2")
@@ -631,7 +740,7 @@ class LifeModel:
         ends = [u.exposure_at(u.events.failure) if u.events.failure is not None else u.E[-1] for u in units]
         E_ref = float(np.median([e for e in ends if e > 0]))
         # start: per-unit least squares y = a_i + m_i X (b = 1)
-        m_i, a_i, res, cf, ac = [], [], [], [], []
+        m_i, a_i, res, cf, ac, yf = [], [], [], [], [], []
         for u, e in zip(units, ends):
             ok = np.isfinite(u.y)
             X = u.E[ok] / E_ref
@@ -644,12 +753,15 @@ class LifeModel:
                 ac.append(float(np.corrcoef(res[-1][:-1], res[-1][1:])[0, 1]))
             if u.events.failure is not None:
                 cf.append(coef[1] * e / E_ref)
+                yf.append(float(coef[0] + coef[1] * e / E_ref))  # fitted HI at the failure
         c0 = float(np.median(cf))
         if c0 == 0:
             c0 = float(np.median(m_i)) or 1.0
         rr = np.array(m_i) / c0
         lr = np.log(rr[rr > 0]) if (rr > 0).sum() >= 2 else np.zeros(2)
         sig0 = float(np.std(np.concatenate(res))) or 1e-6
+        hi_all = np.concatenate([u.y[np.isfinite(u.y)] for u in units])
+        hi_scale = float(np.std(hi_all)) or sig0  # scale of the half-Cauchy prior on HI-unit scatters (< 3 groups)
         theta0 = {"mu": float(np.mean(lr)), "log_s": math.log(max(float(np.std(lr)), 0.05)), "log_b": 0.0,
                   "c": c0, "a0": float(np.mean(a_i)), "log_sa": math.log(max(float(np.std(a_i)), 0.1 * sig0)),
                   "log_sigma": math.log(sig0), "log_sD": math.log(0.2),
@@ -671,68 +783,134 @@ class LifeModel:
             coef, *_ = np.linalg.lstsq(A, V, rcond=None)
             sd = float(np.std(V - A @ coef)) or abs(float(np.mean(V))) * 0.1 or 1e-6
             insp0[q] = {"alpha": float(coef[0]), "beta": float(coef[1]), "log_tau": math.log(sd)}
-        keys = list(cls.PARAMS) + [f"{q}|{k}" for q in qs for k in ("alpha", "beta", "log_tau")]
-        x0 = np.array([theta0[k] for k in cls.PARAMS] + [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")])
-        scale = np.array([1.0, 1.0, 1.0, abs(c0), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, 1.0, 1.0]
-                         + [max(abs(insp0[q][k]), 1e-9) if k != "log_tau" else 1.0
-                            for q in qs for k in ("alpha", "beta", "log_tau")])
-
-        def unpack(x):
-            x = x * scale
-            npar = len(cls.PARAMS)
-            th = dict(zip(cls.PARAMS, x[:npar]))
-            ins = {q: {k: float(x[npar + 3 * j + i]) for i, k in enumerate(("alpha", "beta", "log_tau"))}
-                   for j, q in enumerate(qs)}
-            return th, ins
-
         batch = _Batch(units, E_ref, quantities=qs)
-        windows = np.full((len(units), 2), np.nan)
+        ik = [f"{q}|{k}" for q in qs for k in ("alpha", "beta", "log_tau")]
+        iscale = [max(abs(insp0[q][k]), 1e-9) if k != "log_tau" else 1.0
+                  for q in qs for k in ("alpha", "beta", "log_tau")]
+        ix0 = [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")]
 
-        def nll(xs):
-            th, ins = unpack(xs)
-            if not (-6 < th["log_b"] < 2.5 and -9 < th["log_sD"] < 2 and -9 < th["log_s"] < 3
-                    and abs(th["atanh_rho"]) < 3.0):
-                return 1e30
-            z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=windows)
-            lm = _lse(f) + np.log(dz)
-            if not np.all(np.isfinite(lm)):
-                return 1e30
-            return -float(lm.sum())
+        def setup(kind):
+            """(parameter names, start in the optimiser's coordinates, scale, unpack, nll) of one threshold kind."""
+            if kind == "latent":
+                names, t0 = list(cls.PARAMS), dict(theta0)
+                scale = [1.0, 1.0, 1.0, abs(c0), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, 1.0, 1.0]
+            else:  # the latent scale is fixed by mu = 0 (no latent threshold): c = median unit's HI change at E_ref
+                names = list(cls.PARAMS_OBS)
+                yfa = np.array(yf)
+                t0 = dict(theta0, c=c0 * math.exp(theta0["mu"]), mu=0.0, Y0=float(np.median(yfa)),
+                          log_sY=math.log(max(float(np.std(yfa)), 0.5 * sig0)))
+                ysc = sig0 + abs(t0["Y0"]) * 0.01
+                scale = [1.0, 1.0, abs(t0["c"]), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, ysc, 1.0, 1.0]
+                if failure_level is not None:  # the failure definition's level is known: Y0 is not fitted
+                    j = names.index("Y0")
+                    names.pop(j)
+                    scale.pop(j)
+            sc = np.array(scale + iscale)
+            x0 = np.array([t0[k] for k in names] + ix0) / sc
+            npar = len(names)
+            lo_sY = math.log(hi_scale) - 12.0
 
-        xs0 = x0 / scale
-        # quasi-Newton first (finite-difference gradients of a smooth quadrature), then a Nelder-Mead polish
-        # (robust where the adaptive grid makes the finite differences noisy)
-        r = optimize.minimize(nll, xs0, method="L-BFGS-B", options={"maxiter": 300, "eps": 1e-6})
-        x1 = r.x if np.isfinite(r.fun) and r.fun < nll(xs0) else xs0
-        r2 = optimize.minimize(nll, x1, method="Nelder-Mead",
-                               options={"maxiter": maxiter, "maxfev": maxiter, "xatol": 1e-4, "fatol": 1e-3,
-                                        "adaptive": True})
+            def unpack(xs):
+                x = xs * sc
+                th = dict(zip(names, x[:npar]))
+                if kind == "observable":
+                    th["mu"] = 0.0
+                    if failure_level is not None:
+                        th["Y0"] = float(failure_level)
+                ins = {q: {k: float(x[npar + 3 * j + i]) for i, k in enumerate(("alpha", "beta", "log_tau"))}
+                       for j, q in enumerate(qs)}
+                return th, ins
+
+            windows = np.full((len(units), 2), np.nan)
+
+            def nll(xs):
+                th, ins = unpack(xs)
+                if not (-6 < th["log_b"] < 2.5 and -9 < th["log_s"] < 3 and abs(th["atanh_rho"]) < 3.0):
+                    return 1e30
+                if kind == "latent" and not -9 < th["log_sD"] < 2:
+                    return 1e30
+                if kind == "observable" and not lo_sY < th["log_sY"] < lo_sY + 15.0:
+                    return 1e30
+                z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=windows)
+                lm = _lse(f) + np.log(dz)
+                if not np.all(np.isfinite(lm)):
+                    return 1e30
+                return -float(lm.sum())
+
+            return names, x0, unpack, nll
+
+        def ml(kind):
+            names, xs0, unpack, nll = setup(kind)
+            # quasi-Newton first (finite-difference gradients of a smooth quadrature), then a Nelder-Mead polish
+            # (robust where the adaptive grid makes the finite differences noisy)
+            r = optimize.minimize(nll, xs0, method="L-BFGS-B", options={"maxiter": 300, "eps": 1e-6})
+            x1 = r.x if np.isfinite(r.fun) and r.fun < nll(xs0) else xs0
+            r2 = optimize.minimize(nll, x1, method="Nelder-Mead",
+                                   options={"maxiter": maxiter, "maxfev": maxiter, "xatol": 1e-4, "fatol": 1e-3,
+                                            "adaptive": True})
+            return {"names": names, "unpack": unpack, "nll": nll, "r": r, "r2": r2,
+                    "aic": 2.0 * (len(names) + 3 * len(qs)) + 2.0 * float(r2.fun)}
+
+        kinds = THRESHOLDS if threshold == "auto" else (threshold,)
+        fits = {k: ml(k) for k in kinds}
+        for k, v in fits.items():
+            if progress:
+                print(f"  threshold {k}: log-likelihood {-v['r2'].fun:.2f}", flush=True)
+        kind = min(fits, key=lambda k: fits[k]["aic"])
+        F = fits[kind]
+        unpack, nll, r, r2 = F["unpack"], F["nll"], F["r"], F["r2"]
         th, ins = unpack(r2.x)
+        thr_key = "log_sD" if kind == "latent" else "log_sY"
+        ngroups = min(nfail, len(units))
         draws, pinfo = [], {"method": "none (point estimate)"}
-        if n_draws > 0 and min(nfail, len(units)) < 3:
-            # with 2 units / failures the posterior of a scale under its uniform prior is improper (Gelman 2006:
-            # proper from 3 groups on): there is nothing to draw from; the plug-in estimate with its Student-t threshold is used
-            pinfo = {"method": f"none: {min(nfail, len(units))} failures/units < 3, the posterior of the "
-                               "population scatter is improper under the uniform scale prior; plug-in estimate"}
-            notes.append("parameter uncertainty not propagated: fewer than 3 failures (plug-in estimate)")
-        elif n_draws > 0:
-            def log_prior(xs):  # uniform on every standard deviation and on rho, flat on the rest
-                t, i_ = unpack(xs)
-                return (t["log_s"] + t["log_sa"] + t["log_sigma"] + t["log_sD"]
-                        + sum(v["log_tau"] for v in i_.values())
-                        + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
+        if n_draws > 0:
+            if ngroups >= 3:
+                prior_txt = ("uniform on every standard deviation (s, s_a, sigma, threshold scatter, tau) and on "
+                             "rho; flat on the rest")
+
+                def log_prior(xs):  # uniform on every standard deviation and on rho, flat on the rest
+                    t, i_ = unpack(xs)
+                    return (t["log_s"] + t["log_sa"] + t["log_sigma"] + t[thr_key]
+                            + sum(v["log_tau"] for v in i_.values())
+                            + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
+            else:
+                # with 2 units / failures the posterior of a between-unit scale under the uniform prior is improper
+                # (Gelman 2006: proper from 3 groups on); his recommendation for few groups is a half-Cauchy prior:
+                # scale 1 on the log-rate and log-threshold scatters (a factor e between units), the HI's standard
+                # deviation over the training records on the offset / observable-threshold scatters (HI units)
+                A_thr = 1.0 if kind == "latent" else hi_scale
+                prior_txt = (f"{ngroups} failures/units < 3: half-Cauchy on the between-unit scales (s: scale 1, "
+                             f"s_a: {hi_scale:.3g}, threshold scatter: {A_thr:.3g}), uniform on sigma, tau and rho")
+                notes.append("between-unit scatter from < 3 failures: proper half-Cauchy prior on its scales")
+
+                def hc(l, A):  # log half-Cauchy(0, A) density of exp(l), in the coordinate l (Jacobian exp(l))
+                    return l - math.log1p(math.exp(2 * (l - math.log(A))))
+
+                def log_prior(xs):
+                    t, i_ = unpack(xs)
+                    return (hc(t["log_s"], 1.0) + hc(t["log_sa"], hi_scale) + hc(t[thr_key], A_thr)
+                            + t["log_sigma"] + sum(v["log_tau"] for v in i_.values())
+                            + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
 
             xd, pinfo = _posterior_draws(lambda xs: nll(xs) - log_prior(xs), r2.x, n_draws,
                                          np.random.default_rng(seed))
+            pinfo["prior"] = prior_txt
             draws = [dict(zip(("theta", "inspections"), unpack(x))) for x in xd]
         info = {"n_units": len(units), "n_failures": nfail, "n_censored": len(units) - nfail,
-                "parameter_uncertainty": pinfo,
+                "threshold": kind, "parameter_uncertainty": pinfo,
                 "n_records": int(sum(np.isfinite(u.y).sum() for u in units)), "log_likelihood": float(-r2.fun),
-                "n_params": len(keys), "evals": [int(r.nfev), int(r2.nfev)], "lbfgs_loglik": float(-r.fun), "converged": bool(r2.success),
+                "n_params": len(F["names"]) + 3 * len(qs), "evals": [int(r.nfev), int(r2.nfev)],
+                "lbfgs_loglik": float(-r.fun), "converged": bool(r2.success),
                 "start": theta0, "notes": notes, "units": [u.unit for u in units],
                 "rate_median": float(np.nanmedian([u.rate() for u in units])),
+                "record_spacing": float(np.median([np.median(np.diff(u.t)) for u in units])),
                 "hours_per_step": (float(np.median(hp)) if (hp := [u.hours_per_step for u in units
                                                                   if u.hours_per_step]) else None)}
+        if len(fits) > 1:
+            info["threshold_candidates"] = {k: float(-v["r2"].fun) for k, v in fits.items()}
+            info["threshold_aic"] = {k: float(v["aic"]) for k, v in fits.items()}
+        if kind == "observable" and failure_level is not None:
+            info["failure_level"] = float(failure_level)
         return cls(th, E_ref, exposure, feature, ins, info, time_unit, draws=draws)
 
     def members(self) -> list["LifeModel"]:
@@ -758,7 +936,7 @@ class LifeModel:
         """(dof, scale) of the predictive distribution of a new unit's ln D: the fitted normal scatter
         estimated from n failures, widened to the Student-t predictive (n - 1 dof, scale s_D sqrt(1 + 1/n))."""
         n = int(self.fit_info.get("n_failures", 0))
-        sD = math.exp(self.theta["log_sD"])
+        sD = math.exp(self.theta["log_sD" if self.threshold == "latent" else "log_sY"])
         if n >= 3 and self.plug_in:
             return float(n - 1), sD * math.sqrt(1.0 + 1.0 / n)
         return float("inf"), sD
@@ -783,21 +961,109 @@ class LifeModel:
         """RUL in the unit's time axis for posterior samples ``z`` at time ``t_k`` (alive at ``t_k``);
         ``h``: ``u.truncated(t_k)`` when the caller has it already."""
         h = u.truncated(t_k) if h is None else h
-        E_k = h.exposure_at(t_k)
-        Ef = self.sample_failure_exposure(z, E_k, rng)
         rate = h.rate()
         if not (np.isfinite(rate) and rate > 0):
             rate = float(self.fit_info.get("rate_median", 1.0))
+        if self.threshold == "observable":
+            return self._rul_observable(z, h, t_k, rate, rng)
+        E_k = h.exposure_at(t_k)
+        Ef = self.sample_failure_exposure(z, E_k, rng)
         if h.discrete:
             # failure is found at the start of the first step whose start exposure reaches E_f
             E1 = h.exposure_at(t_k + 1, rate)  # exposure at the start of the next step (its own known load)
             return 1.0 + np.ceil(np.maximum(Ef - E1, 0.0) / rate)
         return (Ef - E_k) / rate
 
+    def _rul_observable(self, z: np.ndarray, h: UnitHistory, t_k: float, rate: float, rng: np.random.Generator,
+                        max_steps: int = 20000) -> np.ndarray:
+        """Observable threshold: simulate the unit's future HI records from its posterior (z, then the offset a
+        from its conditional normal given z and the record, the AR(1) residual carried on from the last record)
+        until the HI passes its threshold Y, drawn from its law truncated to 'not passed by any record so far';
+        RUL = time of the first record past Y (continuous time: interpolated between the two records; the future
+        record spacing is the unit's median spacing)."""
+        th, b, c = self.theta, self.b, self.theta["c"]
+        n = len(z)
+        rho = math.tanh(th.get("atanh_rho", 0.0))
+        sig = math.exp(th["log_sigma"])
+        sg = 1.0 if c >= 0 else -1.0
+        ok = np.flatnonzero(np.isfinite(h.y))
+        r = np.exp(z)
+        if len(ok):
+            bt = _Batch([h], self.E_ref)
+            ma, va = bt.a_post(r[None, :], th, b)
+            a = ma[0] + np.sqrt(va[0]) * rng.standard_normal(n)
+            j = ok[-1]
+            t_last, yl = float(h.t[j]), float(h.y[j])
+            e = yl - a - c * r * (max(h.E[j], 0.0) / self.E_ref) ** b
+            M = float(np.max(sg * h.y[ok]))
+        else:  # no HI yet: offset and residual from their population laws
+            a = th["a0"] + math.exp(th["log_sa"]) * rng.standard_normal(n)
+            e = sig / math.sqrt(1 - rho * rho) * rng.standard_normal(n)
+            t_last, yl, M = float(t_k), float("nan"), -np.inf
+        # threshold: normal (or plug-in Student-t) law of sg*Y truncated to > M
+        df, sc = self.threshold_predictive()
+        cdf, ppf = ((special.ndtr, special.ndtri) if not np.isfinite(df) else
+                    (lambda v: special.stdtr(df, v), lambda p: special.stdtrit(df, p)))
+        lo = (M - sg * th["Y0"]) / sc
+        p_lo = float(cdf(lo)) if np.isfinite(lo) else 0.0
+        x = ppf(np.minimum(p_lo + (1.0 - p_lo) * rng.uniform(0.0, 1.0, n), 1 - 1e-15))
+        bad = ~np.isfinite(x) | (x < lo)
+        x[bad] = lo + np.abs(rng.standard_normal(int(bad.sum()))) * 0.1
+        Yo = sg * th["Y0"] + sc * x  # oriented threshold
+        dt = 1.0 if h.discrete else (float(np.median(np.diff(h.t))) if len(h.t) >= 2
+                                     else float(self.fit_info.get("record_spacing") or rate_scale(self, rate)))
+        E_last = h.exposure_at(t_last)
+
+        def expo(tt):
+            if h.discrete and h.E_next is not None:
+                return h.E_next + (tt - t_last - 1.0) * rate
+            return E_last + (tt - t_last) * rate
+
+        T = np.full(n, np.nan)
+        alive = np.arange(n)
+        y_prev = np.full(n, yl)
+        done, chunk = 0, 32
+        while len(alive) and done < max_steps:
+            k = min(chunk, max_steps - done)
+            tt = t_last + dt * np.arange(done + 1, done + k + 1)
+            X = (np.maximum(expo(tt), 0.0) / self.E_ref) ** b
+            mean = a[alive, None] + c * r[alive, None] * X[None, :]
+            xi = sig * rng.standard_normal((len(alive), k))
+            ee = np.empty_like(xi)
+            ea = e[alive]
+            for i in range(k):
+                ea = rho * ea + xi[:, i]
+                ee[:, i] = ea
+            yy = sg * (mean + ee)
+            past = yy >= Yo[alive, None]
+            hit = past.any(1)
+            first = np.argmax(past, 1)
+            rows = alive[hit]
+            fi = first[hit]
+            if h.discrete:
+                T[rows] = tt[fi]
+            else:
+                y1 = yy[hit, fi]
+                y0 = np.where(fi > 0, yy[hit, np.maximum(fi - 1, 0)], sg * y_prev[rows])
+                frac = np.where(np.isfinite(y0) & (y1 > y0), (Yo[rows] - y0) / np.where(y1 > y0, y1 - y0, 1.0), 1.0)
+                T[rows] = tt[fi] - dt + dt * np.clip(frac, 0.0, 1.0)
+            e[alive] = ea
+            y_prev[alive] = sg * yy[:, -1]
+            alive = alive[~hit]
+            done += k
+            chunk = min(chunk * 2, 4096)
+        T[alive] = t_last + dt * max_steps
+        return np.maximum(T - t_k, 0.0 if not h.discrete else 1.0)
+
     def latent_quantiles(self, z, w, X: float) -> tuple[float, float, float]:
         c = np.cumsum(w)
         q = np.interp([0.05, 0.5, 0.95], c, z)
         return tuple(float(np.exp(v) * X) for v in q)
+
+
+def rate_scale(model: "LifeModel", rate: float) -> float:
+    """Record spacing for a model file without ``record_spacing``: 1/20 of the reference exposure in time."""
+    return max(model.E_ref / max(rate, 1e-300) / 20.0, 1e-12)
 
 
 def _split(n: int, k: int) -> list[int]:
@@ -848,6 +1114,12 @@ def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, 
                 f = ukfs[j]
                 f.update(u.y[k], X)
                 z = f.sample(ns[j], rng)
+                X *= m.latent_scale()
+                if m.threshold == "observable":  # survival so far does not depend on z there
+                    lat.append(np.exp(z) * X)
+                    if t_start is None or tk >= t_start:
+                        rs.append(m.rul_samples(z, u, tk, rng, hk))
+                    continue
                 # survival to E(t_k) as importance weights on the Gaussian posterior
                 sD = math.exp(m.theta["log_sD"])
                 lw = special.log_ndtr(-(z + m.b * math.log(max(u.E[k], 1e-300) / m.E_ref)) / sD) \
@@ -857,6 +1129,7 @@ def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, 
             else:
                 zg, wg = post[j][0][k], post[j][1][k]
                 z = rng.choice(zg, ns[j], p=wg) + rng.uniform(-0.5, 0.5, ns[j]) * (zg[1] - zg[0])
+                X *= m.latent_scale()
                 parts.append((zg, wg, X))
             lat.append(np.exp(z) * X)
             if t_start is None or tk >= t_start:
@@ -939,14 +1212,16 @@ class _UKF:
 
 
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
-             progress: bool = False, n_draws: int = 20) -> LifeModel:
+             progress: bool = False, n_draws: int = 20, threshold: str = "auto",
+             failure_level: float | None = None) -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
     fits, errs = {}, {}
     for name, units in candidates.items():
         try:
-            fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0)
+            fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
+                                       threshold=threshold, failure_level=failure_level)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -957,7 +1232,9 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     best = max(fits, key=lambda k: fits[k].fit_info["log_likelihood"])
     m = fits[best]
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
-        m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws)
+        m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
+                          threshold=m.threshold, failure_level=failure_level)
+        m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
     m.fit_info["exposure_candidates"] = {k: f.fit_info["log_likelihood"] for k, f in fits.items()}
     if errs:
         m.fit_info["exposure_errors"] = errs
@@ -977,6 +1254,6 @@ def predict_at(model: LifeModel, u: UnitHistory, rng: np.random.Generator, n_sam
         zg, wg = m.posterior(u, [tk])
         zg, wg = zg[0], wg[0]
         z = rng.choice(zg, n, p=wg) + rng.uniform(-0.5, 0.5, n) * (zg[1] - zg[0])
-        parts.append((zg, wg, (max(u.E[-1], 0.0) / m.E_ref) ** m.b))
+        parts.append((zg, wg, (max(u.E[-1], 0.0) / m.E_ref) ** m.b * m.latent_scale()))
         rs.append(m.rul_samples(z, u, tk, rng))
     return {"latent": _latent_quantiles(parts), "rul": np.concatenate(rs)}

@@ -11,6 +11,8 @@ Modules (one concept each; rclpy is imported inside functions, so importing them
 * :mod:`hd_ros.diagnostics`: DiagnosticStatus construction, callback containment;
 * :mod:`hd_ros.managed`: the managed (lifecycle) node base of the four nodes and their parameter
   boilerplate (imports rclpy: import it only in node modules);
+* :mod:`hd_ros.rtthread`: ``RtSubscription``, one subscription on its own node + executor thread,
+  optionally ``SCHED_FIFO`` (any node's lowest-latency input);
 * :mod:`hd_ros.replay`, :mod:`hd_ros.record`: the replay and record runtimes (they need no stack node).
 
 This package namespace re-exports the names of the first six modules (``import hd_ros as ru``;

@@ -121,7 +121,10 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
        "at +-T_rated equals loss_arcmin at the output.", True, False,
        loss_arcmin=(0.8, "arcmin", "hysteresis loss (catalogue ~1 for ratio >= 80; 0.8 is the most A_ratio = 4 "
                     "reaches with the 25 us step stable)"),
-       A_ratio=(4.0, "-", "Bouc-Wen A / k_FS (pre-sliding stiffness ratio)")),
+       A_ratio=(4.0, "-", "Bouc-Wen A / k_FS (pre-sliding stiffness ratio)"),
+       exact_step=(0.0, "-", "z_h integration: 0 = explicit Euler (the default plant's recorded bags; rings up "
+                   "and can diverge while the mesh is inside a backlash dead zone), 1 = exact step at the "
+                   "updated flexspline speed (stable at any speed; the families use it; docs/FAMILIES.md)")),
     _E("backlash", "transmission",
        "Smoothed dead zone g(.; j) in the mesh, j = max(0, h+ + h- - 2 delta_0)/cos(alpha) + j0 "
        "(appears with wear once the preload delta_0 is consumed).", True, False,

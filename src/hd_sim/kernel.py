@@ -38,9 +38,21 @@ stiffness factor 1 + eps cos(2 theta_m + psi), e_KE = -r_m theta_KE so that at
 zero load theta_f = theta_m/N + theta_KE.
 
 Integration: semi-implicit (symplectic) Euler for the mechanics, a
-semi-implicit step for the R-L winding, explicit Euler for the Bouc-Wen and
-thermal states. Logged accelerations are the ones computed from the logged
-forces at the same instant, so r1..r4 hold to rounding on ``/sim/internal``.
+semi-implicit step for the R-L winding, explicit Euler for the thermal states.
+The Bouc-Wen state z_h has two steps (``bw_exact``, effect parameter
+``hysteresis.exact_step``): 0 = explicit Euler from the sub-step's start state
+(the default plant, kept for its recorded bags), 1 = :func:`bouc_wen_step`, the
+exact solution for the sub-step's *updated* flexspline speed y_FS' (z then
+advances with the same speed as y_FS, so k_FS y + z is a symplectic spring).
+The explicit step updates z and y_FS' both from the old state: on the unloading
+branch (slope A) that pair is a forward-Euler oscillator, amplified by
+sqrt(1 + A dt^2/m_FSy) ~ 1.28 per 25 us step at A_ratio 4; the mesh damping c_m
+hides it while the teeth are in contact, but inside a backlash dead zone the
+flexspline rings up within a few ms, z leaves +-z_max and the run can
+diverge (docs/FAMILIES.md, "Bouc-Wen step").
+
+Logged accelerations are the ones computed from the logged forces at the same
+instant, so r1..r4 hold to rounding on ``/sim/internal``.
 
 Mid-mission fault (``flt_*``, built by :func:`hd_sim.plant.fault_vector`):
 from internal step ``flt_n_on`` on (``< 0``: no fault) the fault fraction
@@ -95,8 +107,8 @@ KNAMES = (
     # at the default eps_v, smooth at a wide one), 1 = LuGre (bristle stiffness/damping sigma0, sigma1);
     # torsion 0 = three-slope/linear mesh_law, 1 = cubic mesh spring k_m1 u + k_cub u^3
     "fric_law", "lg_sigma0", "lg_sigma1", "tors_law", "k_cub",
-    # numerics
-    "dt", "n_sub",
+    # numerics; bw_exact: Bouc-Wen step (0 explicit Euler as recorded, 1 exact step, see module doc)
+    "dt", "n_sub", "bw_exact",
 )
 KI = {n: i for i, n in enumerate(KNAMES)}
 
@@ -151,6 +163,41 @@ def _sigmoid(a):
     return e / (1.0 + e)
 
 
+@njit(cache=True, inline="always")
+def bouc_wen_step(z, v, A, beta, gamma, dt):
+    """Exact step of dz/dt = A v - beta |v| z - gamma v |z| (Bouc-Wen, n = 1) with v held over dt.
+
+    For a held v the law is linear in z on each branch: loading (z v >= 0) relaxes z to
+    z_ss = A v / ((beta + gamma)|v|) at the rate (beta + gamma)|v|; unloading (z v < 0) moves z
+    towards 0 at the rate (beta - gamma)|v| (linearly, slope A v, when beta = gamma) and, once z
+    crosses 0 inside the step, the rest of the step is loading. Closed form on each piece, so
+    |z| never exceeds max(|z0|, A/(beta + gamma)) whatever |v| dt (the explicit Euler step
+    overshoots once (beta + gamma)|v| dt > 2).
+    """
+    if v == 0.0 or dt <= 0.0:
+        return z
+    av = abs(v)
+    if z * v < 0.0:  # unloading: z heads for 0
+        r_u = (beta - gamma) * av
+        if abs(r_u) * dt < 1e-12:
+            t0 = -z / (A * v)
+            if t0 >= dt:
+                return z + A * v * dt
+        else:
+            z_u = A * v / r_u
+            ratio = z_u / (z_u - z)
+            t0 = -math.log(ratio) / r_u if 0.0 < ratio < math.inf else math.inf
+            if not (t0 < dt):
+                return z_u + (z - z_u) * math.exp(-r_u * dt)
+        dt = dt - t0
+        z = 0.0
+    r_l = (beta + gamma) * av  # loading (z v >= 0)
+    if r_l * dt < 1e-12:
+        return z + A * v * dt
+    z_ss = A * v / r_l
+    return z_ss + (z - z_ss) * math.exp(-r_l * dt)
+
+
 @njit(cache=True)
 def mesh_law(ug, k1, k2, k3, u1, u2, nl_on):
     """Elastic mesh force [N] for a mesh deflection ug [m] (after the dead zone)."""
@@ -203,7 +250,7 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
     omega_max_f = P[K_omega_max_f]; n_ctrl = int(P[K_n_ctrl]); q_f = P[K_q_f]
     locked = P[K_input_locked] > 0.5
     C_w = P[K_C_w]; R_wh = P[K_R_wh]; C_h = P[K_C_h]; R_ha = P[K_R_ha]; heat_on = P[K_heat_on]
-    dt = P[K_dt]; n_sub = int(P[K_n_sub])
+    dt = P[K_dt]; n_sub = int(P[K_n_sub]); bw_exact = P[K_bw_exact] > 0.5
     flt_n_on = P[K_flt_n_on]; flt_n_ramp = max(P[K_flt_n_ramp], 1.0)
     flt_fric = P[K_flt_fric]; flt_kFS = P[K_flt_kFS]; flt_bwA = P[K_flt_bwA]; flt_bwb = P[K_flt_bwb]
     bw_A0 = bw_A; bw_beta0 = bw_beta; bw_gamma0 = bw_gamma
@@ -431,7 +478,7 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
                 i_d = (i_d + g * (v_d + pp * w_m * L * i_q)) / (1.0 + R * g)
                 i_q = (i_q + g * (v_q - pp * w_m * (L * i_d + psi))) / (1.0 + R * g)
             # ---- mechanics (semi-implicit Euler) ---------------------------------------------
-            if hyst_on > 0.5:
+            if hyst_on > 0.5 and not bw_exact:  # explicit Euler from the old state (as recorded)
                 z += dt * (bw_A * vy - bw_beta * abs(vy) * z - bw_gamma * vy * abs(z))
             if lugre:
                 # exact step of dz/dt = w - sigma0 |w| z / g for w, g frozen over dt (stable at any speed)
@@ -442,6 +489,8 @@ def integrate(P, x0, theta_ref, omega_ff, T_ext, T_amb, out):  # noqa: C901 - on
             w_m += a_m * dt
             vx += a_x * dt
             vy += a_y * dt
+            if hyst_on > 0.5 and bw_exact:  # exact step at the updated speed, as y_FS below
+                z = bouc_wen_step(z, vy, bw_A, bw_beta, bw_gamma, dt)
             w_f += a_f * dt
             th_m += w_m * dt
             x += vx * dt

@@ -50,3 +50,34 @@ def synth_units(n: int, seed: int, truth: dict = TRUTH, censor_frac: float = 0.3
                                  events=ev))
         eol[f"U{i:02d}"] = kf
     return units, eol
+
+
+TRUTH_OBS = {"s": 0.25, "b": 1.6, "c": 2.0, "a0": 1.0, "sa": 0.3, "sigma": 0.08, "rho": 0.8, "Y0": 3.0, "sY": 0.03}
+
+
+def synth_units_observable(n: int, seed: int, truth: dict = TRUTH_OBS,
+                           max_t: int = 2000) -> tuple[list[UnitHistory], dict]:
+    """n units whose failure is defined on the *measured* HI: the first mission whose HI record reaches the
+    unit's level Y_i ~ N(Y0, sY^2) (as NASA's capacity or Virkler's crack length); AR(1) HI noise, so a unit's
+    measurement runs persistently ahead of or behind its smooth path. Records before that mission are kept."""
+    rng = np.random.default_rng(seed)
+    units, eol = [], {}
+    for i in range(n):
+        z = rng.normal(0.0, truth["s"])
+        a = rng.normal(truth["a0"], truth["sa"])
+        Y = rng.normal(truth["Y0"], truth["sY"])
+        t = np.arange(0, max_t + 1, dtype=float)
+        e = np.empty(len(t))
+        e[0] = rng.normal(0, truth["sigma"] / math.sqrt(1 - truth["rho"] ** 2))
+        xi = rng.normal(0, truth["sigma"], len(t))
+        for k in range(1, len(t)):
+            e[k] = truth["rho"] * e[k - 1] + xi[k]
+        y = a + truth["c"] * math.exp(z) * (t / E_REF) ** truth["b"] + e
+        kf = int(np.argmax(y >= Y))
+        if kf < 3:  # failed on arrival: redraw-free skip (kept deterministic by the seed)
+            continue
+        u = f"V{i:02d}"
+        units.append(UnitHistory(u, t[:kf], y[:kf], t[:kf].copy(), discrete=True, E_next=float(kf),
+                                 events=UnitEvents(failure=float(kf))))
+        eol[u] = kf
+    return units, eol

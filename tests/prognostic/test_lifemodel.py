@@ -203,9 +203,11 @@ def test_model_json_carries_the_parameter_draws(tmp_path, synth_fit):
     assert LifeModel.from_json(d).members()[0].plug_in
 
 
-def test_two_failures_give_the_plug_in_model_with_a_note():
-    """With 2 failed units the scale posterior is improper under its uniform prior: no draws, said so."""
+def test_two_failures_draw_under_the_half_cauchy_prior_with_a_note():
+    """With 2 failed units the scale posterior is improper under the uniform prior; the half-Cauchy prior on the
+    between-unit scales is used instead (draws exist), and the fit says so."""
     units, _ = synth_units(2, seed=7, censor_frac=0.0)
-    m = LifeModel.fit(units, n_draws=20)
-    assert m.draws == [] and m.members() == [m] and m.plug_in
-    assert any("fewer than 3 failures" in n for n in m.fit_info["notes"])
+    m = LifeModel.fit(units, n_draws=8)
+    assert len(m.draws) == 8 and not m.members()[0].plug_in
+    assert any("half-Cauchy" in n for n in m.fit_info["notes"])
+    assert "half-Cauchy" in m.fit_info["parameter_uncertainty"]["prior"]
