@@ -59,11 +59,12 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         t0 = time.perf_counter()
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
-                          seed=seed, threshold=THRESHOLD[0], failure_level=level)
+                          seed=seed, threshold=THRESHOLD[0], failure_level=level,
+                          path=PATH[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
-        sg["threshold"] = m.threshold
+        sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
         per_grid.append(sg)
         per_ukf.append(su)
         per_plug.append(sp)
@@ -78,6 +79,7 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
 
 
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
+PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth shape by AIC per fit)
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
 
 
@@ -125,7 +127,7 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
             us = [unit_history(a, args.feature, e) for a in fleet]
             attach_events(us, ev)
             cands[e] = us
-        best = fit_best(cands, feature=args.feature, n_draws=0, threshold=THRESHOLD[0])
+        best = fit_best(cands, feature=args.feature, n_draws=0, threshold=THRESHOLD[0], path=PATH[0])
         exposure = best.exposure
         res["exposure_choice"] = best.fit_info["exposure_candidates"]
         print(f"{name}: exposure by maximum likelihood on all of {name}: {exposure} "
@@ -227,6 +229,9 @@ def main(argv=None) -> int:
     ap.add_argument("--threshold", default="auto", choices=("auto", "latent", "observable"),
                     help="failure threshold on the latent state, on the observable HI, or chosen by maximum "
                          "likelihood in every fit (training units only)")
+    ap.add_argument("--path", default="auto", choices=("auto", "power", "paris"),
+                    help="latent path family: power law, crack-growth (Paris) shape, or chosen by AIC in every fit "
+                         "(training units only)")
     ap.add_argument("--no-known-level", dest="known_level", action="store_false",
                     help="NASA / Virkler: fit the observable threshold's level instead of taking it from the failure "
                          "definition (80 %% of rated capacity, 49.8 mm)")
@@ -235,6 +240,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     DRAWS[0] = args.draws
     THRESHOLD[0] = args.threshold
+    PATH[0] = args.path
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
@@ -336,11 +342,11 @@ def _louo_subset(units, eols, args, name, level=None):
         t0 = time.perf_counter()
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed, threshold=THRESHOLD[0],
-                          failure_level=level)
+                          failure_level=level, path=PATH[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
-        sg["threshold"] = m.threshold
+        sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
         per_grid.append(sg)
         per_ukf.append(su)
         per_plug.append(sp)
