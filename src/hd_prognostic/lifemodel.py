@@ -424,10 +424,13 @@ class _Batch:
         self.rho = rho
         self._b = (b, rho)
 
-    def _zstats(self, z: np.ndarray, th: dict):
-        """(sum g x~, sum u x~, sum x~^2) per unit and grid point, x~ the prewhitened latent path (Paris)."""
+    def _zstats(self, z: np.ndarray, th: dict, resid: bool = True):
+        """Per unit and grid point, x~ the prewhitened latent path (Paris): sum g x~ and, with ``resid``, the
+        sums of g e and e^2 of the residual e = u - a0 g - c x~ (summed directly: the expanded quadratic
+        cancels catastrophically where the path nears its blow-up)."""
         rho = self.rho
-        X = _path_L(self.path, z[self.idx], self.lx[:, None], th)
+        uu = np.exp(z[self.idx] + self.lx[:, None])
+        X = _paris_h(uu, math.exp(th["log_b"])) * math.exp(-th.get("log_D0", 0.0))
         Xp = np.vstack([np.zeros((1, X.shape[1])), X[:-1]])
         xt = np.where(self.link[:, None], X - rho * Xp, math.sqrt(1.0 - rho * rho) * X)
         e = self._ends
@@ -435,7 +438,12 @@ class _Batch:
         def seg(v):
             c = np.vstack([np.zeros((1, v.shape[1])), np.cumsum(v, 0)])
             return c[e[1:]] - c[e[:-1]]
-        return seg(self._pg[:, None] * xt), seg(self._pu[:, None] * xt), seg(xt * xt)
+        g = self._pg[:, None]
+        if not resid:
+            return seg(g * xt)
+        res = (self._pu[:, None] - th["a0"] * g) - th["c"] * xt
+        blown = seg((uu >= _PARIS_UMAX).astype(float)) > 0  # a record past the blow-up: impossible path
+        return seg(g * xt), seg(g * res), seg(res * res), blown
 
     def logf(self, z: np.ndarray, th: dict, b: float, insp: dict) -> np.ndarray:
         """log of prior(z) p(y|z) p(insp|z) P(event|z), z of shape (U, n)."""
@@ -453,14 +461,15 @@ class _Batch:
             Swx = (self.SuX - a0 * self.SgX)[:, None]
             See = Sw - 2 * c * r * Swx + c * c * r * r * self.SXX[:, None]
         else:
-            RgX, RuX, RXX = self._zstats(z, th)
-            Sge = (self.Sgu - a0 * self.Sgg)[:, None] - c * RgX
-            See = Sw - 2 * c * (RuX - a0 * RgX) + c * c * RXX
+            _, Sge, See, blown = self._zstats(z, th)
         v2 = sig * sig
         Sgg = self.Sgg[:, None]
         f = f - 0.5 * n * (_LOG2PI + math.log(v2)) - 0.5 * np.log1p(Sgg * sa * sa / v2) \
-            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge) \
+            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge if self.path == "power"
+                          else np.maximum(See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge, 0.0)) \
             + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho)  # Jacobian of the chain starts
+        if self.path != "power":
+            f = np.where(blown, -np.inf, f)
         for j, q in enumerate(self.quantities):
             m = insp.get(q)
             sel = self.qi == j
@@ -499,7 +508,7 @@ class _Batch:
         self.set_b(b, rho)
         sa, sig = math.exp(th["log_sa"]), math.exp(th["log_sigma"])
         prec = 1.0 / sa ** 2 + self.Sgg[:, None] / sig ** 2
-        RgX = r * self.SgX[:, None] if self.path == "power" else self._zstats(np.log(r), th)[0]
+        RgX = r * self.SgX[:, None] if self.path == "power" else self._zstats(np.log(r), th, resid=False)
         m = (th["a0"] / sa ** 2 + (self.Sgu[:, None] - th["c"] * RgX) / sig ** 2) / prec
         return m, np.broadcast_to(1.0 / prec, m.shape)
 
