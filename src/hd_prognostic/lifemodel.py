@@ -508,8 +508,9 @@ class _Batch:
         self.set_b(b, rho)
         sa, sig = math.exp(th["log_sa"]), math.exp(th["log_sigma"])
         prec = 1.0 / sa ** 2 + self.Sgg[:, None] / sig ** 2
-        RgX = r * self.SgX[:, None] if self.path == "power" else self._zstats(np.log(r), th, resid=False)
-        m = (th["a0"] / sa ** 2 + (self.Sgu[:, None] - th["c"] * RgX) / sig ** 2) / prec
+        cRgX = th["c"] * r * self.SgX[:, None] if self.path == "power" else \
+            th["c"] * self._zstats(np.log(r), th, resid=False)
+        m = (th["a0"] / sa ** 2 + (self.Sgu[:, None] - cRgX) / sig ** 2) / prec
         return m, np.broadcast_to(1.0 / prec, m.shape)
 
     def _obs_event_terms(self, z, r, th, b, rho, sa, sig, c, a0) -> np.ndarray:
@@ -1351,12 +1352,14 @@ class _UKF:
         S = V @ np.diag(np.sqrt(np.maximum(w, 0.0)))
         Xs = np.vstack([self.x, self.x + S.T, self.x - S.T])
         rho = self.rho
+        pw = self.model.path == "power" or E is None
         if self.prev is None:  # chain start: marginal variance sigma^2 / (1 - rho^2)
-            Z = Xs[:, 1] + self.c * self._lat(Xs[:, 0], X, E)
+            Z = Xs[:, 1] + (self.c * np.exp(Xs[:, 0]) * X if pw else self.c * self._lat(Xs[:, 0], X, E))
             r2, meas = self.sig ** 2 / (1.0 - rho * rho), y
         else:
             yp, Xp, Ep = self.prev
-            Z = Xs[:, 1] * (1.0 - rho) + self.c * (self._lat(Xs[:, 0], X, E) - rho * self._lat(Xs[:, 0], Xp, Ep))
+            Z = Xs[:, 1] * (1.0 - rho) + (self.c * np.exp(Xs[:, 0]) * (X - rho * Xp) if pw else
+                                          self.c * (self._lat(Xs[:, 0], X, E) - rho * self._lat(Xs[:, 0], Xp, Ep)))
             r2, meas = self.sig ** 2, y - rho * yp
         self.prev = (y, X, E)
         y = meas
