@@ -353,7 +353,8 @@ def _louo_subset(units, eols, args, name, level=None):
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
-              f"{sp['coverage_p5_p95']:.2f} (threshold {sg['threshold']})  [{time.perf_counter() - t0:.1f} s]", flush=True)
+              f"{sp['coverage_p5_p95']:.2f} (threshold {sg['threshold']})  [{time.perf_counter() - t0:.1f} s]",
+              flush=True)
     return per_grid, per_ukf, per_plug
 
 

@@ -1421,7 +1421,8 @@ def predict_at(model: LifeModel, u: UnitHistory, rng: np.random.Generator, n_sam
         zg, wg = zg[0], wg[0]
         z = rng.choice(zg, n, p=wg) + rng.uniform(-0.5, 0.5, n) * (zg[1] - zg[0])
         if m.path == "power" or u.E[-1] <= 0:
-            parts.append((zg, wg, (max(u.E[-1], 0.0) / m.E_ref) ** m.b * m.latent_scale() if m.path == "power" else 0.0))
+            X = (max(u.E[-1], 0.0) / m.E_ref) ** m.b * m.latent_scale() if m.path == "power" else 0.0
+            parts.append((zg, wg, X))
         else:
             parts.append((np.log(m.L(zg, u.E[-1])), wg, m.latent_scale()))
         rs.append(m.rul_samples(z, u, tk, rng))
