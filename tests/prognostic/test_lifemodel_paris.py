@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
 
 from hd_prognostic import metrics as M
 from hd_prognostic.lifemodel import LifeModel, UnitEvents, UnitHistory, predict_history
