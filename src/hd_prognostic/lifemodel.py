@@ -14,6 +14,9 @@ Model (latent degradation path, population of units):
 
 * latent degradation ``L_i(E) = r_i (E / E_ref)^b``, per-unit rate ``ln r_i ~ N(mu, s^2)``, shared shape
   exponent ``b`` (fitted: the law's shape comes from the data);
+* or (``path="paris"``, crack-growth shape) ``L_i(E) = h(r_i E / E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1`` (Paris'
+  law with dK ~ sqrt(a) integrated: finite-time blow-up at ``E_ref / r_i``); ``path="auto"`` fits both and keeps the
+  lower AIC (per fit, never per scored unit); see :func:`_path_L`;
 * HI: ``y_ij = a_i + c L_i(E_ij) + e_ij``, per-unit offset ``a_i ~ N(a0, s_a^2)`` (marginalised
   analytically), AR(1) residuals ``e_ij = rho e_i(j-1) + N(0, sigma^2)`` (prewhitened; rho fitted);
 * failure when ``L_i`` crosses the unit's threshold ``D_i``, ``ln D_i ~ N(0, s_D^2)`` (median threshold 1
