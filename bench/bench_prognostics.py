@@ -59,11 +59,12 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         t0 = time.perf_counter()
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
-                          seed=seed, threshold=THRESHOLD[0], failure_level=level)
+                          seed=seed, threshold=THRESHOLD[0], failure_level=level,
+                          path=PATH[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
-        sg["threshold"] = m.threshold
+        sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
         per_grid.append(sg)
         per_ukf.append(su)
         per_plug.append(sp)
@@ -78,6 +79,7 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
 
 
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
+PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth shape by AIC per fit)
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
 
 
@@ -125,7 +127,7 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
             us = [unit_history(a, args.feature, e) for a in fleet]
             attach_events(us, ev)
             cands[e] = us
-        best = fit_best(cands, feature=args.feature, n_draws=0, threshold=THRESHOLD[0])
+        best = fit_best(cands, feature=args.feature, n_draws=0, threshold=THRESHOLD[0], path=PATH[0])
         exposure = best.exposure
         res["exposure_choice"] = best.fit_info["exposure_candidates"]
         print(f"{name}: exposure by maximum likelihood on all of {name}: {exposure} "
@@ -218,6 +220,8 @@ def main(argv=None) -> int:
     ap.add_argument("--nasa", default=None, help="folder with B0005.csv ... (NASA cells)")
     ap.add_argument("--virkler", default=None, help="folder with the Virkler CSV files")
     ap.add_argument("--virkler-every", type=int, default=1, help="score every k-th specimen (all are used to fit)")
+    ap.add_argument("--virkler-specimens", default=None,
+                    help="comma-separated specimen names: score only these (of the every-k-th ones)")
     ap.add_argument("--out", default="runs/bench_prognostics")
     ap.add_argument("--feature", default="HF_MTW_IF")
     ap.add_argument("--samples", type=int, default=1000)
@@ -227,6 +231,9 @@ def main(argv=None) -> int:
     ap.add_argument("--threshold", default="auto", choices=("auto", "latent", "observable"),
                     help="failure threshold on the latent state, on the observable HI, or chosen by maximum "
                          "likelihood in every fit (training units only)")
+    ap.add_argument("--path", default="auto", choices=("auto", "power", "paris"),
+                    help="latent path family: power law, crack-growth (Paris) shape, or chosen by AIC in every fit "
+                         "(training units only)")
     ap.add_argument("--no-known-level", dest="known_level", action="store_false",
                     help="NASA / Virkler: fit the observable threshold's level instead of taking it from the failure "
                          "definition (80 %% of rated capacity, 49.8 mm)")
@@ -235,6 +242,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     DRAWS[0] = args.draws
     THRESHOLD[0] = args.threshold
+    PATH[0] = args.path
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
@@ -320,6 +328,8 @@ def csv_dataset_every(name, hi, events, args, level=None):
     eols = {k: v.failure for k, v in ev.items() if v.failure is not None}
     k = max(1, args.virkler_every)
     scored = {u.unit for u in units[::k]}
+    if getattr(args, "virkler_specimens", None):  # a subset of those (slow fits: Paris path ~3 min per fold)
+        scored &= set(args.virkler_specimens.split(","))
     keep = {u: t for u, t in eols.items() if u in scored}
     g, u, pl = _louo_subset(units, keep, args, name, level)
     return {"exposure": "time column", "life": g, "ukf": u, "plugin": pl, "scored_every": k}
@@ -336,18 +346,19 @@ def _louo_subset(units, eols, args, name, level=None):
         t0 = time.perf_counter()
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed, threshold=THRESHOLD[0],
-                          failure_level=level)
+                          failure_level=level, path=PATH[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
-        sg["threshold"] = m.threshold
+        sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
         per_grid.append(sg)
         per_ukf.append(su)
         per_plug.append(sp)
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
-              f"{sp['coverage_p5_p95']:.2f} (threshold {m.threshold})  [{time.perf_counter() - t0:.1f} s]", flush=True)
+              f"{sp['coverage_p5_p95']:.2f} (threshold {sg['threshold']})  [{time.perf_counter() - t0:.1f} s]",
+              flush=True)
     return per_grid, per_ukf, per_plug
 
 

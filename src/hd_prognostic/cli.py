@@ -281,7 +281,7 @@ def _fit_life(args) -> int:
     for n in dict.fromkeys(notes):
         print(f"note: {n}", file=sys.stderr)
     m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws, threshold=args.threshold,
-                 failure_level=args.failure_level)
+                 failure_level=args.failure_level, path=args.path)
     m.to_json(args.out)
     fi = m.fit_info
     print(json.dumps({"exposure": m.exposure, "E_ref": m.E_ref, **m.to_json()["readable"],
@@ -289,6 +289,7 @@ def _fit_life(args) -> int:
                       "units": fi["n_units"], "failures": fi["n_failures"], "censored": fi["n_censored"],
                       "exposure_candidates": fi.get("exposure_candidates"),
                       "threshold_candidates": fi.get("threshold_candidates"),
+                      "path": m.path, "path_aic": fi.get("path_aic"),
                       "parameter_draws": len(m.draws),
                       "parameter_draws_ess": fi.get("parameter_uncertainty", {}).get("ess")}, indent=1, default=float))
     print(f"wrote {args.out}")
@@ -417,6 +418,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold", choices=("auto", "latent", "observable"), default="auto",
                    help="failure threshold on the latent degradation or on the measured HI; auto: the "
                         "maximum-likelihood one (same parameter count, so also the AIC choice)")
+    p.add_argument("--path", choices=("power", "paris", "auto"), default="power",
+                   help="latent path family: power law, crack-growth (Paris-type, accelerating to a finite-time "
+                        "blow-up) shape, or auto: both fitted, the lower AIC kept (the Paris likelihood costs ~10x)")
     p.add_argument("--failure-level", type=float, default=None, metavar="HI",
                    help="when failure is defined as the measured HI reaching a known level (e.g. 1.6 Ah, 0.0498 m): "
                         "that level, the observable threshold's median (not fitted then)")

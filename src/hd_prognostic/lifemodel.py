@@ -14,6 +14,9 @@ Model (latent degradation path, population of units):
 
 * latent degradation ``L_i(E) = r_i (E / E_ref)^b``, per-unit rate ``ln r_i ~ N(mu, s^2)``, shared shape
   exponent ``b`` (fitted: the law's shape comes from the data);
+* or (``path="paris"``, crack-growth shape) ``L_i(E) = h(r_i E / E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1`` (Paris'
+  law with dK ~ sqrt(a) integrated: finite-time blow-up at ``E_ref / r_i``); ``path="auto"`` fits both and keeps the
+  lower AIC (per fit, never per scored unit); see :func:`_path_L`;
 * HI: ``y_ij = a_i + c L_i(E_ij) + e_ij``, per-unit offset ``a_i ~ N(a0, s_a^2)`` (marginalised
   analytically), AR(1) residuals ``e_ij = rho e_i(j-1) + N(0, sigma^2)`` (prewhitened; rho fitted);
 * failure when ``L_i`` crosses the unit's threshold ``D_i``, ``ln D_i ~ N(0, s_D^2)`` (median threshold 1
@@ -293,13 +296,40 @@ def _lse(f: np.ndarray) -> np.ndarray:
         return mm + np.log(np.sum(np.exp(f - mm[..., None]), axis=-1))
 
 
+PATHS = ("power", "paris")  # latent path families (LifeModel.fit(path=...)); see _path_L
+_PARIS_UMAX = 1.0 - 1e-6  # the Paris path blows up at u = 1: held finite (huge) past this
+
+
+def _paris_h(u: np.ndarray, p: float) -> np.ndarray:
+    """Crack-growth (Paris-type) shape ``(1 - u)^(-p) - 1``: ~ p u early, finite-time blow-up at u = 1."""
+    return np.expm1(-p * np.log1p(-np.minimum(u, _PARIS_UMAX)))
+
+
+def _path_L(path: str, z, lx, th: dict):
+    """Latent degradation at log rate z and normalised log exposure lx (broadcast):
+    power ``exp(z) (E/E_ref)^b``; paris ``h(exp(z) E/E_ref) / D0`` (z a time scale: u = r E / E_ref)."""
+    b = math.exp(th["log_b"])
+    if path == "power":
+        return np.exp(z + b * lx)
+    return _paris_h(np.exp(z + lx), b) * math.exp(-th.get("log_D0", 0.0))
+
+
+def _path_logL(path: str, z, lx, th: dict):
+    """ln of :func:`_path_L` (-inf at zero exposure)."""
+    if path == "power":
+        return z + math.exp(th["log_b"]) * lx
+    with np.errstate(divide="ignore"):
+        return np.log(_paris_h(np.exp(z + lx), math.exp(th["log_b"]))) - th.get("log_D0", 0.0)
+
+
 class _Batch:
     """Units' data in flat arrays (normalised log exposure), so the integrand is evaluated for every unit
     at once on a (units x grid) array; only the shape exponent b changes the sufficient statistics."""
 
     def __init__(self, units: list[UnitHistory], E_ref: float, censor_at: list | None = None,
-                 quantities: list[str] | None = None):
+                 quantities: list[str] | None = None, path: str = "power"):
         self.U = len(units)
+        self.path = path
         idx, ys, lx, link = [], [], [], []
         self.llo, self.lhi, self.lcens = (np.full(self.U, np.nan) for _ in range(3))
         qi, qu, qx, qv = [], [], [], []
@@ -365,6 +395,8 @@ class _Batch:
         chain start sqrt(1 - rho^2) times y_j, 1, X_j."""
         if (b, rho) == self._b:
             return
+        if self.path != "power":
+            return self._set_b_paris(b, rho)
         X = np.exp(b * self.lx)
         k0 = math.sqrt(1.0 - rho * rho)
         L = self.link
@@ -380,6 +412,42 @@ class _Batch:
         self.rho = rho
         self._b = (b, rho)
 
+    def _set_b_paris(self, b: float, rho: float) -> None:
+        """Paris path: the latent regressor depends on z (not linear in r), so only the z-free sums are cached;
+        :meth:`_zstats` sums the rest per unit and grid point."""
+        k0 = math.sqrt(1.0 - rho * rho)
+        L = self.link
+        yp = np.concatenate([[0.0], self.y[:-1]])
+        u = np.where(L, self.y - rho * yp, k0 * self.y)
+        g = np.where(L, 1.0 - rho, k0)
+        bc = lambda w: np.bincount(self.idx, w, self.U)  # noqa: E731
+        self.Sgg, self.Sgu, self.Suu = bc(g * g), bc(g * u), bc(u * u)
+        self._pg, self._pu = g, u
+        self._ends = np.searchsorted(self.idx, np.arange(self.U + 1))
+        self.rho = rho
+        self._b = (b, rho)
+
+    def _zstats(self, z: np.ndarray, th: dict, resid: bool = True):
+        """Per unit and grid point, x~ the prewhitened latent path (Paris): sum g x~ and, with ``resid``, the
+        sums of g e and e^2 of the residual e = u - a0 g - c x~ (summed directly: the expanded quadratic
+        cancels catastrophically where the path nears its blow-up)."""
+        rho = self.rho
+        uu = np.exp(z[self.idx] + self.lx[:, None])
+        X = _paris_h(uu, math.exp(th["log_b"])) * math.exp(-th.get("log_D0", 0.0))
+        Xp = np.vstack([np.zeros((1, X.shape[1])), X[:-1]])
+        xt = np.where(self.link[:, None], X - rho * Xp, math.sqrt(1.0 - rho * rho) * X)
+        e = self._ends
+
+        def seg(v):
+            c = np.vstack([np.zeros((1, v.shape[1])), np.cumsum(v, 0)])
+            return c[e[1:]] - c[e[:-1]]
+        g = self._pg[:, None]
+        if not resid:
+            return seg(g * xt)
+        res = (self._pu[:, None] - th["a0"] * g) - th["c"] * xt
+        blown = seg((uu >= _PARIS_UMAX).astype(float)) > 0  # a record past the blow-up: impossible path
+        return seg(g * xt), seg(g * res), seg(res * res), blown
+
     def logf(self, z: np.ndarray, th: dict, b: float, insp: dict) -> np.ndarray:
         """log of prior(z) p(y|z) p(insp|z) P(event|z), z of shape (U, n)."""
         rho = math.tanh(th.get("atanh_rho", 0.0))
@@ -390,15 +458,21 @@ class _Batch:
         f = -0.5 * ((z - mu) / s) ** 2 - math.log(s) - 0.5 * _LOG2PI
         n = self.n[:, None]
         # residual e = u - a0 g - c r x~ of the prewhitened series; offset a - a0 ~ N(0, s_a^2) marginalised
-        Sge = (self.Sgu - a0 * self.Sgg)[:, None] - c * r * self.SgX[:, None]
         Sw = (self.Suu - 2 * a0 * self.Sgu + a0 * a0 * self.Sgg)[:, None]
-        Swx = (self.SuX - a0 * self.SgX)[:, None]
-        See = Sw - 2 * c * r * Swx + c * c * r * r * self.SXX[:, None]
+        if self.path == "power":
+            Sge = (self.Sgu - a0 * self.Sgg)[:, None] - c * r * self.SgX[:, None]
+            Swx = (self.SuX - a0 * self.SgX)[:, None]
+            See = Sw - 2 * c * r * Swx + c * c * r * r * self.SXX[:, None]
+        else:
+            _, Sge, See, blown = self._zstats(z, th)
         v2 = sig * sig
         Sgg = self.Sgg[:, None]
         f = f - 0.5 * n * (_LOG2PI + math.log(v2)) - 0.5 * np.log1p(Sgg * sa * sa / v2) \
-            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge) \
+            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge if self.path == "power"
+                          else np.maximum(See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge, 0.0)) \
             + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho)  # Jacobian of the chain starts
+        if self.path != "power":
+            f = np.where(blown, -np.inf, f)
         for j, q in enumerate(self.quantities):
             m = insp.get(q)
             sel = self.qi == j
@@ -406,12 +480,23 @@ class _Batch:
                 continue
             tau = math.exp(m["log_tau"])
             rows = self.qu[sel]
-            term = -0.5 * ((self.qv[sel, None] - m["alpha"] - m["beta"] * r[rows] * self.qX[sel, None]) / tau) ** 2 \
+            Lq = r[rows] * self.qX[sel, None] if self.path == "power" else \
+                _path_L(self.path, z[rows], self.qx[sel, None], th)
+            term = -0.5 * ((self.qv[sel, None] - m["alpha"] - m["beta"] * Lq) / tau) ** 2 \
                 - math.log(tau) - 0.5 * _LOG2PI
             np.add.at(f, rows, term)
         if "log_sY" in th:  # failure threshold on the observable HI
             return f + self._obs_event_terms(z, r, th, b, rho, sa, sig, c, a0)
         fl = np.isfinite(self.lhi)
+        if self.path != "power":
+            if fl.any():  # (both ends past the blow-up clip: probability 0, log -inf)
+                with np.errstate(divide="ignore"):
+                    f[fl] += _log_diff_ndtr(_path_logL(self.path, z[fl], self.llo[fl, None], th) / sD,
+                                            _path_logL(self.path, z[fl], self.lhi[fl, None], th) / sD)
+            ce = np.isfinite(self.lcens)
+            if ce.any():
+                f[ce] += special.log_ndtr(-_path_logL(self.path, z[ce], self.lcens[ce, None], th) / sD)
+            return f
         if fl.any():
             f[fl] += _log_diff_ndtr((z[fl] + b * self.llo[fl, None]) / sD, (z[fl] + b * self.lhi[fl, None]) / sD)
         ce = np.isfinite(self.lcens)
@@ -426,7 +511,9 @@ class _Batch:
         self.set_b(b, rho)
         sa, sig = math.exp(th["log_sa"]), math.exp(th["log_sigma"])
         prec = 1.0 / sa ** 2 + self.Sgg[:, None] / sig ** 2
-        m = (th["a0"] / sa ** 2 + (self.Sgu[:, None] - th["c"] * r * self.SgX[:, None]) / sig ** 2) / prec
+        cRgX = th["c"] * r * self.SgX[:, None] if self.path == "power" else \
+            th["c"] * self._zstats(np.log(r), th, resid=False)
+        m = (th["a0"] / sa ** 2 + (self.Sgu[:, None] - cRgX) / sig ** 2) / prec
         return m, np.broadcast_to(1.0 / prec, m.shape)
 
     def _obs_event_terms(self, z, r, th, b, rho, sa, sig, c, a0) -> np.ndarray:
@@ -444,9 +531,14 @@ class _Batch:
             ma, va = self.a_post(r, th, b)
             ma, va = ma[fl], va[fl]
             rn = (rho ** self.nf[fl])[:, None]
-            Xf = np.exp(b * self.lhi[fl])[:, None]
-            Xk = np.exp(b * self.lx_last[fl])[:, None]
-            mf = ma * (1 - rn) + c * r[fl] * (Xf - rn * Xk) + rn * self.y_last[fl, None]
+            if self.path == "power":
+                Xf = np.exp(b * self.lhi[fl])[:, None]
+                Xk = np.exp(b * self.lx_last[fl])[:, None]
+                mf = ma * (1 - rn) + c * r[fl] * (Xf - rn * Xk) + rn * self.y_last[fl, None]
+            else:
+                Lf = _path_L(self.path, z[fl], self.lhi[fl, None], th)
+                Lk = _path_L(self.path, z[fl], self.lx_last[fl, None], th)
+                mf = ma * (1 - rn) + c * (Lf - rn * Lk) + rn * self.y_last[fl, None]
             vf = (1 - rn) ** 2 * va + sig * sig * (1 - rn * rn) / (1 - rho * rho)
             al = (sg * mf - sg * Y0) / np.sqrt(sY * sY + vf)
             be = np.broadcast_to((M[fl] - sg * Y0) / sY, al.shape)
@@ -525,9 +617,15 @@ class _SubBatch(_Batch):
         pos[rows] = np.arange(len(rows))
         m = pos[base.qu] >= 0 if len(base.qu) else np.zeros(0, bool)
         self.qi, self.qu, self.qx, self.qv = base.qi[m], pos[base.qu[m]], base.qx[m], base.qv[m]
+        self.path = base.path
+        if self.path != "power":  # the records of these units (z-dependent sums are per record)
+            rec = pos[base.idx] >= 0
+            self.idx, self.lx, self.link, self.y = pos[base.idx[rec]], base.lx[rec], base.link[rec], base.y[rec]
         self._b = None
 
     def set_b(self, b: float, rho: float = 0.0) -> None:
+        if self.path != "power":
+            return _Batch.set_b(self, b, rho)
         B = self._base
         B.set_b(b, rho)
         r = self._rows
@@ -656,6 +754,16 @@ class LifeModel:
         return math.exp(self.theta["log_b"])
 
     @property
+    def path(self) -> str:
+        """Latent path family: ``power`` or ``paris`` (crack-growth shape; :func:`_path_L`)."""
+        return self.fit_info.get("path", "power")
+
+    def L(self, z, E):
+        """Latent degradation (1 = median latent threshold) at log rate(s) z and exposure(s) E (broadcast)."""
+        with np.errstate(divide="ignore"):
+            return _path_L(self.path, z, np.log(np.maximum(E, 0.0) / self.E_ref), self.theta)
+
+    @property
     def threshold(self) -> str:
         """``latent`` or ``observable``: where the failure threshold sits."""
         return "observable" if "log_sY" in self.theta else "latent"
@@ -706,7 +814,7 @@ class LifeModel:
 
     def log_marginal(self, units: list[UnitHistory]) -> np.ndarray:
         """Log marginal likelihood of each unit's record and events under this model."""
-        bt = _Batch(units, self.E_ref, quantities=sorted(self.inspections))
+        bt = _Batch(units, self.E_ref, quantities=sorted(self.inspections), path=self.path)
         z, f, dz = bt.grid(self.theta, self.b, self.inspections)
         return _lse(f) + np.log(dz)
 
@@ -714,7 +822,8 @@ class LifeModel:
     @classmethod
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
-            seed: int = 0, threshold: str = "latent", failure_level: float | None = None) -> "LifeModel":
+            seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
+            path: str = "power") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -726,7 +835,15 @@ class LifeModel:
         of being estimated from the gap between the last record and the unrecorded value at failure.
         ``n_draws`` posterior draws of the population parameters
         (:func:`_posterior_draws`; 0: point estimate only) carry the parameter uncertainty of a small fleet into
-        the prognosis."""
+        the prognosis.
+
+        ``path``: the latent path family, ``power`` (``r (E/E_ref)^b``), ``paris`` (crack-growth shape
+        ``h(r E/E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1``: Paris' law with dK ~ sqrt(a) integrated, per-unit
+        rate r = the inverse of the unit's blow-up exposure, exponent p = 2/(m-2) shared; one parameter more
+        than the power law: D0 with the latent threshold, mu with the observable one) or ``auto`` (every
+        family x threshold fitted on these units, the lowest AIC kept; never chosen per scored unit)."""
+        if path not in PATHS + ("auto",):
+            raise ValueError(f"life-model fit: path {path!r} is not one of {', '.join(PATHS)}, auto")
         if threshold not in THRESHOLDS + ("auto",):
             raise ValueError(f"life-model fit: threshold {threshold!r} is not one of {', '.join(THRESHOLDS)}, auto")
         units = [u for u in units if len(u.t) >= 2 and np.isfinite(u.y).sum() >= 2]
@@ -783,15 +900,28 @@ class LifeModel:
             coef, *_ = np.linalg.lstsq(A, V, rcond=None)
             sd = float(np.std(V - A @ coef)) or abs(float(np.mean(V))) * 0.1 or 1e-6
             insp0[q] = {"alpha": float(coef[0]), "beta": float(coef[1]), "log_tau": math.log(sd)}
-        batch = _Batch(units, E_ref, quantities=qs)
+        batches = {fam: _Batch(units, E_ref, quantities=qs, path=fam) for fam in PATHS}
+        lends = np.log(np.array([e for e in ends if e > 0]) / E_ref)
         ik = [f"{q}|{k}" for q in qs for k in ("alpha", "beta", "log_tau")]
         iscale = [max(abs(insp0[q][k]), 1e-9) if k != "log_tau" else 1.0
                   for q in qs for k in ("alpha", "beta", "log_tau")]
         ix0 = [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")]
 
-        def setup(kind):
+        def setup(kind, fam="power"):
             """(parameter names, start in the optimiser's coordinates, scale, unpack, nll) of one threshold kind."""
-            if kind == "latent":
+            batch = batches[fam]
+            if fam == "paris":  # start: p = 1, median unit at u = 1/2 at its end (h = 1), rate scatter of the ends
+                names = list(cls.PARAMS if kind == "latent" else cls.PARAMS_OBS)
+                yfa = np.array(yf)
+                t0 = dict(theta0, mu=math.log(0.5) - float(np.median(lends)), log_b=0.0, c=c0, log_D0=0.0,
+                          log_s=math.log(max(float(np.std(lends)), 0.05)),
+                          Y0=float(np.median(yfa)), log_sY=math.log(max(float(np.std(yfa)), 0.5 * sig0)))
+                scale = {"c": abs(c0), "a0": sig0 + abs(theta0["a0"]) * 0.01, "Y0": sig0 + abs(t0["Y0"]) * 0.01}
+                names = names + (["log_D0"] if kind == "latent" else ["mu"])
+                if kind == "observable" and failure_level is not None:
+                    names.remove("Y0")
+                scale = [scale.get(k, 1.0) for k in names]
+            elif kind == "latent":
                 names, t0 = list(cls.PARAMS), dict(theta0)
                 scale = [1.0, 1.0, 1.0, abs(c0), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, 1.0, 1.0]
             else:  # the latent scale is fixed by mu = 0 (no latent threshold): c = median unit's HI change at E_ref
@@ -813,10 +943,12 @@ class LifeModel:
             def unpack(xs):
                 x = xs * sc
                 th = dict(zip(names, x[:npar]))
-                if kind == "observable":
+                if kind == "observable" and fam == "power":
                     th["mu"] = 0.0
+                if kind == "observable":
                     if failure_level is not None:
                         th["Y0"] = float(failure_level)
+                    th.pop("log_D0", None)
                 ins = {q: {k: float(x[npar + 3 * j + i]) for i, k in enumerate(("alpha", "beta", "log_tau"))}
                        for j, q in enumerate(qs)}
                 return th, ins
@@ -831,16 +963,19 @@ class LifeModel:
                     return 1e30
                 if kind == "observable" and not lo_sY < th["log_sY"] < lo_sY + 15.0:
                     return 1e30
+                if fam == "paris" and not (-12 < th["mu"] < 12 and abs(th.get("log_D0", 0.0)) < 12):
+                    return 1e30
                 z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=windows)
-                lm = _lse(f) + np.log(dz)
+                with np.errstate(divide="ignore"):
+                    lm = _lse(f) + np.log(dz)
                 if not np.all(np.isfinite(lm)):
                     return 1e30
                 return -float(lm.sum())
 
             return names, x0, unpack, nll
 
-        def ml(kind):
-            names, xs0, unpack, nll = setup(kind)
+        def ml(kind, fam="power"):
+            names, xs0, unpack, nll = setup(kind, fam)
             # quasi-Newton first (finite-difference gradients of a smooth quadrature), then a Nelder-Mead polish
             # (robust where the adaptive grid makes the finite differences noisy)
             r = optimize.minimize(nll, xs0, method="L-BFGS-B", options={"maxiter": 300, "eps": 1e-6})
@@ -852,11 +987,13 @@ class LifeModel:
                     "aic": 2.0 * (len(names) + 3 * len(qs)) + 2.0 * float(r2.fun)}
 
         kinds = THRESHOLDS if threshold == "auto" else (threshold,)
-        fits = {k: ml(k) for k in kinds}
-        for k, v in fits.items():
+        fams = PATHS if path == "auto" else (path,)
+        allfits = {(f_, k): ml(k, f_) for f_ in fams for k in kinds}
+        for (f_, k), v in allfits.items():
             if progress:
-                print(f"  threshold {k}: log-likelihood {-v['r2'].fun:.2f}", flush=True)
-        kind = min(fits, key=lambda k: fits[k]["aic"])
+                print(f"  path {f_}, threshold {k}: log-likelihood {-v['r2'].fun:.2f}, AIC {v['aic']:.2f}", flush=True)
+        fam, kind = min(allfits, key=lambda k: allfits[k]["aic"])
+        fits = {k: v for (f_, k), v in allfits.items() if f_ == fam}
         F = fits[kind]
         unpack, nll, r, r2 = F["unpack"], F["nll"], F["r"], F["r2"]
         th, ins = unpack(r2.x)
@@ -906,6 +1043,10 @@ class LifeModel:
                 "record_spacing": float(np.median([np.median(np.diff(u.t)) for u in units])),
                 "hours_per_step": (float(np.median(hp)) if (hp := [u.hours_per_step for u in units
                                                                   if u.hours_per_step]) else None)}
+        if fam != "power":
+            info["path"] = fam
+        if len(fams) > 1:
+            info["path_aic"] = {f_: float(min(v["aic"] for (g_, _), v in allfits.items() if g_ == f_)) for f_ in fams}
         if len(fits) > 1:
             info["threshold_candidates"] = {k: float(-v["r2"].fun) for k, v in fits.items()}
             info["threshold_aic"] = {k: float(v["aic"]) for k, v in fits.items()}
@@ -927,7 +1068,7 @@ class LifeModel:
         given the record up to t_k and survival to ``E(t_k)``: (z grid, weights), shapes (K, n)."""
         times = u.t if times is None else np.atleast_1d(np.asarray(times, float))
         hs = [u.truncated(t) for t in times]
-        bt = _Batch(hs, self.E_ref, censor_at=list(times), quantities=sorted(self.inspections))
+        bt = _Batch(hs, self.E_ref, censor_at=list(times), quantities=sorted(self.inspections), path=self.path)
         z, f, _ = bt.grid(self.theta, self.b, self.inspections)
         w = np.exp(f - f.max(1, keepdims=True))
         return z, w / w.sum(1, keepdims=True)
@@ -948,13 +1089,21 @@ class LifeModel:
         # the normal / Student-t cdf and inverse from scipy.special (a frozen scipy.stats law per call costs ms)
         cdf, ppf = ((special.ndtr, special.ndtri) if not np.isfinite(df) else
                     (lambda v: special.stdtr(df, v), lambda p: special.stdtrit(df, p)))
-        lo = (z + b * math.log(E_k / self.E_ref)) / sc if E_k > 0 else np.full_like(z, -np.inf)
+        if self.path == "power":
+            lo = (z + b * math.log(E_k / self.E_ref)) / sc if E_k > 0 else np.full_like(z, -np.inf)
+        else:
+            lo = _path_logL(self.path, z, math.log(E_k / self.E_ref), self.theta) / sc if E_k > 0 \
+                else np.full_like(z, -np.inf)
         p_lo = cdf(lo)
         u = p_lo + (1.0 - p_lo) * rng.uniform(0.0, 1.0, len(z))
         x = ppf(np.minimum(u, 1 - 1e-15))
         bad = ~np.isfinite(x) | (x < lo)
         x[bad] = lo[bad] + np.abs(rng.standard_normal(int(bad.sum()))) * 0.1  # far tail: just past the bound
-        return self.E_ref * np.exp((sc * x - z) / b)
+        if self.path == "power":
+            return self.E_ref * np.exp((sc * x - z) / b)
+        # paris: h(u) = D D0 -> u = 1 - (1 + D D0)^(-1/p), E = E_ref u / r
+        hD = np.exp(sc * x + self.theta.get("log_D0", 0.0))
+        return self.E_ref * -np.expm1(-np.log1p(hD) / b) * np.exp(-z)
 
     def rul_samples(self, z: np.ndarray, u: UnitHistory, t_k: float, rng: np.random.Generator,
                     h: UnitHistory | None = None) -> np.ndarray:
@@ -989,12 +1138,13 @@ class LifeModel:
         ok = np.flatnonzero(np.isfinite(h.y))
         r = np.exp(z)
         if len(ok):
-            bt = _Batch([h], self.E_ref)
+            bt = _Batch([h], self.E_ref, path=self.path)
             ma, va = bt.a_post(r[None, :], th, b)
             a = ma[0] + np.sqrt(va[0]) * rng.standard_normal(n)
             j = ok[-1]
             t_last, yl = float(h.t[j]), float(h.y[j])
-            e = yl - a - c * r * (max(h.E[j], 0.0) / self.E_ref) ** b
+            e = yl - a - (c * r * (max(h.E[j], 0.0) / self.E_ref) ** b if self.path == "power"
+                          else c * self.L(z, float(h.E[j])))
             M = float(np.max(sg * h.y[ok]))
         else:  # no HI yet: offset and residual from their population laws
             a = th["a0"] + math.exp(th["log_sa"]) * rng.standard_normal(n)
@@ -1026,8 +1176,11 @@ class LifeModel:
         while len(alive) and done < max_steps:
             k = min(chunk, max_steps - done)
             tt = t_last + dt * np.arange(done + 1, done + k + 1)
-            X = (np.maximum(expo(tt), 0.0) / self.E_ref) ** b
-            mean = a[alive, None] + c * r[alive, None] * X[None, :]
+            if self.path == "power":
+                X = (np.maximum(expo(tt), 0.0) / self.E_ref) ** b
+                mean = a[alive, None] + c * r[alive, None] * X[None, :]
+            else:
+                mean = a[alive, None] + c * self.L(z[alive, None], expo(tt)[None, :])
             xi = sig * rng.standard_normal((len(alive), k))
             ee = np.empty_like(xi)
             ea = e[alive]
@@ -1110,19 +1263,21 @@ def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, 
             if not ns[j]:
                 continue
             X = (max(u.E[k], 0.0) / m.E_ref) ** m.b
+            pw = m.path == "power"
             if method == "ukf":
                 f = ukfs[j]
-                f.update(u.y[k], X)
+                f.update(u.y[k], X, u.E[k])
                 z = f.sample(ns[j], rng)
                 X *= m.latent_scale()
                 if m.threshold == "observable":  # survival so far does not depend on z there
-                    lat.append(np.exp(z) * X)
+                    lat.append(np.exp(z) * X if pw else m.L(z, u.E[k]) * m.latent_scale())
                     if t_start is None or tk >= t_start:
                         rs.append(m.rul_samples(z, u, tk, rng, hk))
                     continue
                 # survival to E(t_k) as importance weights on the Gaussian posterior
                 sD = math.exp(m.theta["log_sD"])
-                lw = special.log_ndtr(-(z + m.b * math.log(max(u.E[k], 1e-300) / m.E_ref)) / sD) \
+                lw = special.log_ndtr(-(z + m.b * math.log(max(u.E[k], 1e-300) / m.E_ref) if pw
+                                        else np.log(m.L(z, u.E[k]))) / sD) \
                     if u.E[k] > 0 else np.zeros(ns[j])
                 w = np.exp(lw - lw.max())
                 z = z[rng.choice(ns[j], ns[j], p=w / w.sum())]
@@ -1130,8 +1285,11 @@ def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, 
                 zg, wg = post[j][0][k], post[j][1][k]
                 z = rng.choice(zg, ns[j], p=wg) + rng.uniform(-0.5, 0.5, ns[j]) * (zg[1] - zg[0])
                 X *= m.latent_scale()
-                parts.append((zg, wg, X))
-            lat.append(np.exp(z) * X)
+                if pw or u.E[k] <= 0:
+                    parts.append((zg, wg, X if pw else 0.0))
+                else:  # ln L is increasing in z: its quantiles are the transformed grid's
+                    parts.append((np.log(m.L(zg, u.E[k])), wg, m.latent_scale()))
+            lat.append(np.exp(z) * X if pw else m.L(z, u.E[k]) * m.latent_scale())
             if t_start is None or tk >= t_start:
                 rs.append(m.rul_samples(z, u, tk, rng, hk))
         lq = _latent_quantiles(parts) if parts else np.quantile(np.concatenate(lat), [0.05, 0.5, 0.95])
@@ -1168,6 +1326,7 @@ class _UKF:
 
     def __init__(self, model: LifeModel):
         th = model.theta
+        self.model = model
         self.c, self.sig = th["c"], math.exp(th["log_sigma"])
         self.rho = math.tanh(th.get("atanh_rho", 0.0))
         self.prev = None  # (y, X) of the previous finite record: AR(1) residuals are prewhitened
@@ -1181,7 +1340,13 @@ class _UKF:
         self.wm[0] = lam / self.cc
         self.wc[0] = lam / self.cc + (1 - alpha ** 2 + beta)
 
-    def update(self, y: float, X: float) -> None:
+    def _lat(self, z: np.ndarray, X: float, E) -> np.ndarray:
+        """Latent path at the sigma points: exp(z) X (power law; X = (E/E_ref)^b) or the model's path at E."""
+        if self.model.path == "power" or E is None:
+            return np.exp(z) * X
+        return self.model.L(z, E)
+
+    def update(self, y: float, X: float, E: float | None = None) -> None:
         if not np.isfinite(y):
             self.prev = None
             return
@@ -1190,14 +1355,16 @@ class _UKF:
         S = V @ np.diag(np.sqrt(np.maximum(w, 0.0)))
         Xs = np.vstack([self.x, self.x + S.T, self.x - S.T])
         rho = self.rho
+        pw = self.model.path == "power" or E is None
         if self.prev is None:  # chain start: marginal variance sigma^2 / (1 - rho^2)
-            Z = Xs[:, 1] + self.c * np.exp(Xs[:, 0]) * X
+            Z = Xs[:, 1] + (self.c * np.exp(Xs[:, 0]) * X if pw else self.c * self._lat(Xs[:, 0], X, E))
             r2, meas = self.sig ** 2 / (1.0 - rho * rho), y
         else:
-            yp, Xp = self.prev
-            Z = Xs[:, 1] * (1.0 - rho) + self.c * np.exp(Xs[:, 0]) * (X - rho * Xp)
+            yp, Xp, Ep = self.prev
+            Z = Xs[:, 1] * (1.0 - rho) + (self.c * np.exp(Xs[:, 0]) * (X - rho * Xp) if pw else
+                                          self.c * (self._lat(Xs[:, 0], X, E) - rho * self._lat(Xs[:, 0], Xp, Ep)))
             r2, meas = self.sig ** 2, y - rho * yp
-        self.prev = (y, X)
+        self.prev = (y, X, E)
         y = meas
         zm = self.wm @ Z
         Sz = self.wc @ (Z - zm) ** 2 + r2
@@ -1213,7 +1380,7 @@ class _UKF:
 
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
              progress: bool = False, n_draws: int = 20, threshold: str = "auto",
-             failure_level: float | None = None) -> LifeModel:
+             failure_level: float | None = None, path: str = "power") -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
@@ -1221,7 +1388,7 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     for name, units in candidates.items():
         try:
             fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
-                                       threshold=threshold, failure_level=failure_level)
+                                       threshold=threshold, failure_level=failure_level, path=path)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -1233,8 +1400,10 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     m = fits[best]
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
         m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
-                          threshold=m.threshold, failure_level=failure_level)
+                          threshold=m.threshold, failure_level=failure_level, path=m.path)
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
+        if "path_aic" in fits[best].fit_info:
+            m.fit_info["path_aic"] = fits[best].fit_info["path_aic"]
     m.fit_info["exposure_candidates"] = {k: f.fit_info["log_likelihood"] for k, f in fits.items()}
     if errs:
         m.fit_info["exposure_errors"] = errs
@@ -1254,6 +1423,10 @@ def predict_at(model: LifeModel, u: UnitHistory, rng: np.random.Generator, n_sam
         zg, wg = m.posterior(u, [tk])
         zg, wg = zg[0], wg[0]
         z = rng.choice(zg, n, p=wg) + rng.uniform(-0.5, 0.5, n) * (zg[1] - zg[0])
-        parts.append((zg, wg, (max(u.E[-1], 0.0) / m.E_ref) ** m.b * m.latent_scale()))
+        if m.path == "power" or u.E[-1] <= 0:
+            X = (max(u.E[-1], 0.0) / m.E_ref) ** m.b * m.latent_scale() if m.path == "power" else 0.0
+            parts.append((zg, wg, X))
+        else:
+            parts.append((np.log(m.L(zg, u.E[-1])), wg, m.latent_scale()))
         rs.append(m.rul_samples(z, u, tk, rng))
     return {"latent": _latent_quantiles(parts), "rul": np.concatenate(rs)}
