@@ -61,6 +61,8 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize, special
 
+from hd_prognostic.ukf import merwe_weights
+
 EVENT_KINDS = ("failure", "removal", "inspection")
 EVENT_COLUMNS = ("actuator_id", "mission_index", "event", "quantity", "value")
 EXPOSURES = ("missions", "hours", "load")
@@ -1332,13 +1334,7 @@ class _UKF:
         self.prev = None  # (y, X) of the previous finite record: AR(1) residuals are prewhitened
         self.x = np.array([th["mu"], th["a0"]])
         self.P = np.diag([math.exp(th["log_s"]) ** 2, math.exp(th["log_sa"]) ** 2])
-        n, alpha, beta, kappa = 2, 0.5, 2.0, 0.0
-        lam = alpha ** 2 * (n + kappa) - n
-        self.cc = n + lam
-        self.wm = np.full(2 * n + 1, 0.5 / self.cc)
-        self.wc = self.wm.copy()
-        self.wm[0] = lam / self.cc
-        self.wc[0] = lam / self.cc + (1 - alpha ** 2 + beta)
+        self.cc, self.wm, self.wc = merwe_weights(2)  # state (z, a); alpha 0.5, beta 2, kappa 0
 
     def _lat(self, z: np.ndarray, X: float, E) -> np.ndarray:
         """Latent path at the sigma points: exp(z) X (power law; X = (E/E_ref)^b) or the model's path at E."""

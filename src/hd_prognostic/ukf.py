@@ -16,20 +16,26 @@ import numpy as np
 from hd_prognostic.models import DegradationModel
 
 
+def merwe_weights(n: int, alpha: float = 0.5, beta: float = 2.0, kappa: float = 0.0) -> tuple[float, np.ndarray, np.ndarray]:
+    """Merwe scaled sigma-point weights for an ``n``-state filter: ``(c, wm, wc)`` with ``c = n + lambda``
+    (sigma points at ``x +- columns of sqrt(c P)``), ``wm`` the mean and ``wc`` the covariance weights."""
+    lam = alpha**2 * (n + kappa) - n
+    c = n + lam
+    wm = np.full(2 * n + 1, 0.5 / c)
+    wc = wm.copy()
+    wm[0] = lam / c
+    wc[0] = lam / c + (1 - alpha**2 + beta)
+    return c, wm, wc
+
+
 class UnscentedKalmanFilter:
     def __init__(self, model: DegradationModel, x0: np.ndarray, P0: np.ndarray, alpha: float = 0.5,
                  beta: float = 2.0, kappa: float = 0.0) -> None:
         self.model = model
         self.x = np.asarray(x0, float).copy()
         self.P = np.asarray(P0, float).copy()
-        n = len(self.x)
-        lam = alpha**2 * (n + kappa) - n
-        self.c = n + lam
-        self.wm = np.full(2 * n + 1, 0.5 / self.c)
-        self.wc = self.wm.copy()
-        self.wm[0] = lam / self.c
-        self.wc[0] = lam / self.c + (1 - alpha**2 + beta)
-        self.n = n
+        self.n = n = len(self.x)
+        self.c, self.wm, self.wc = merwe_weights(n, alpha, beta, kappa)
 
     @classmethod
     def from_prior(cls, model: DegradationModel, n_samples: int = 20000, seed: int = 0, **kw) -> "UnscentedKalmanFilter":
