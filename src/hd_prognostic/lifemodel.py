@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import optimize, special
+from scipy import optimize, sparse, special
 
 from hd_prognostic.ukf import merwe_weights
 
@@ -425,30 +425,62 @@ class _Batch:
         bc = lambda w: np.bincount(self.idx, w, self.U)  # noqa: E731
         self.Sgg, self.Sgu, self.Suu = bc(g * g), bc(g * u), bc(u * u)
         self._pg, self._pu = g, u
-        self._ends = np.searchsorted(self.idx, np.arange(self.U + 1))
+        if getattr(self, "_sum", None) is None:  # z-free structure of the records (kept across b, rho)
+            N = len(self.idx)
+            ends = np.searchsorted(self.idx, np.arange(self.U + 1))
+            # per-unit sums as one sparse (units x records) product: each unit's records summed in order, with
+            # no other unit's values in its sum (a running sum across units would lose the digits of a unit
+            # next to one near its blow-up)
+            self._sum = sparse.csr_matrix((np.ones(N), np.arange(N), ends), shape=(self.U, N))
+            self._starts = np.flatnonzero(~self.link)
+            self._lxmax = np.full(self.U, -np.inf)  # largest log exposure per unit (the record nearest blow-up)
+            np.maximum.at(self._lxmax, self.idx, self.lx)
+        self._zc = None
         self.rho = rho
         self._b = (b, rho)
 
     def _zstats(self, z: np.ndarray, th: dict, resid: bool = True):
         """Per unit and grid point, x~ the prewhitened latent path (Paris): sum g x~ and, with ``resid``, the
         sums of g e and e^2 of the residual e = u - a0 g - c x~ (summed directly: the expanded quadratic
-        cancels catastrophically where the path nears its blow-up)."""
-        rho = self.rho
-        uu = np.exp(z[self.idx] + self.lx[:, None])
-        X = _paris_h(uu, math.exp(th["log_b"])) * math.exp(-th.get("log_D0", 0.0))
-        Xp = np.vstack([np.zeros((1, X.shape[1])), X[:-1]])
-        xt = np.where(self.link[:, None], X - rho * Xp, math.sqrt(1.0 - rho * rho) * X)
-        e = self._ends
-
-        def seg(v):
-            c = np.vstack([np.zeros((1, v.shape[1])), np.cumsum(v, 0)])
-            return c[e[1:]] - c[e[:-1]]
+        cancels catastrophically where the path nears its blow-up), and whether a record lies past the
+        blow-up. One pass over a (records x grid) array, in place; sum g x~ is kept for :meth:`a_post` at
+        the same z."""
+        rho, p, D0 = self.rho, math.exp(th["log_b"]), math.exp(-th.get("log_D0", 0.0))
+        key = (p, D0, rho)
+        zc = self._zc
+        if not resid and zc is not None and zc[0] is z and zc[1] == key:
+            return zc[2]
+        # X = h(exp(z + lx)) / D0 (the arithmetic of _paris_h, in place)
+        X = np.add(z[self.idx], self.lx[:, None])
+        np.exp(X, out=X)
+        np.minimum(X, _PARIS_UMAX, out=X)
+        np.negative(X, out=X)
+        np.log1p(X, out=X)
+        X *= -p
+        np.expm1(X, out=X)
+        X *= D0
+        N, n = X.shape
+        V = np.empty((N, 3 if resid else 1, n))
+        xt = V[:, 0]  # prewhitened: X_j - rho X_(j-1) in a chain, sqrt(1 - rho^2) X_j at a chain start
+        np.multiply(X[:-1], rho, out=xt[1:])
+        np.subtract(X[1:], xt[1:], out=xt[1:])
+        st = self._starts
+        xt[st] = math.sqrt(1.0 - rho * rho) * X[st]
         g = self._pg[:, None]
+        if resid:
+            res = V[:, 2]  # e = (u - a0 g) - c x~
+            np.multiply(xt, th["c"], out=X)
+            np.subtract(self._pu[:, None] - th["a0"] * g, X, out=res)
+            np.multiply(g, res, out=V[:, 1])
+            np.multiply(res, res, out=res)
+        np.multiply(g, xt, out=xt)
+        S = (self._sum @ V.reshape(N, -1)).reshape(self.U, -1, n)
+        Sgx = S[:, 0]
+        self._zc = (z, key, Sgx)
         if not resid:
-            return seg(g * xt)
-        res = (self._pu[:, None] - th["a0"] * g) - th["c"] * xt
-        blown = seg((uu >= _PARIS_UMAX).astype(float)) > 0  # a record past the blow-up: impossible path
-        return seg(g * xt), seg(g * res), seg(res * res), blown
+            return Sgx
+        blown = np.exp(z + self._lxmax[:, None]) >= _PARIS_UMAX  # a record past the blow-up: impossible path
+        return Sgx, S[:, 1], S[:, 2], blown
 
     def logf(self, z: np.ndarray, th: dict, b: float, insp: dict) -> np.ndarray:
         """log of prior(z) p(y|z) p(insp|z) P(event|z), z of shape (U, n)."""
@@ -506,7 +538,7 @@ class _Batch:
             f[ce] += special.log_ndtr(-(z[ce] + b * self.lcens[ce, None]) / sD)
         return f
 
-    def a_post(self, r: np.ndarray, th: dict, b: float) -> tuple[np.ndarray, np.ndarray]:
+    def a_post(self, r: np.ndarray, th: dict, b: float, z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Posterior mean and variance of the unit offsets ``a_i`` given the HI record and ``r = exp(z)``
         (conjugate normal: prewhitened regression u = a g + c r x~ + N(0, sigma^2), prior N(a0, s_a^2))."""
         rho = math.tanh(th.get("atanh_rho", 0.0))
@@ -514,7 +546,7 @@ class _Batch:
         sa, sig = math.exp(th["log_sa"]), math.exp(th["log_sigma"])
         prec = 1.0 / sa ** 2 + self.Sgg[:, None] / sig ** 2
         cRgX = th["c"] * r * self.SgX[:, None] if self.path == "power" else \
-            th["c"] * self._zstats(np.log(r), th, resid=False)
+            th["c"] * self._zstats(np.log(r) if z is None else z, th, resid=False)
         m = (th["a0"] / sa ** 2 + (self.Sgu[:, None] - cRgX) / sig ** 2) / prec
         return m, np.broadcast_to(1.0 / prec, m.shape)
 
@@ -530,7 +562,7 @@ class _Batch:
         M = (self.ymax if sg > 0 else -self.ymin)[:, None]
         fl = np.isfinite(self.lhi)
         if fl.any():
-            ma, va = self.a_post(r, th, b)
+            ma, va = self.a_post(r, th, b, z)
             ma, va = ma[fl], va[fl]
             rn = (rho ** self.nf[fl])[:, None]
             if self.path == "power":
@@ -571,7 +603,8 @@ class _Batch:
             if not len(rows):
                 break
             z = lo[rows, None] + (hi - lo)[rows, None] * lin
-            sub = _SubBatch(self, rows)
+            # (Paris: the whole batch itself when every unit is on the list: its z-free structure is kept)
+            sub = self if self.path != "power" and len(rows) == self.U else _SubBatch(self, rows)
             f = sub.logf(z, th, b, insp)
             f = np.where(np.isfinite(f), f, -np.inf)
             Z[rows], F[rows] = z, f
@@ -597,10 +630,13 @@ class _Batch:
 
 def _log_sub_ndtr(al: np.ndarray, be: np.ndarray) -> np.ndarray:
     """log(Phi(al) - Phi(be)), floored at log(1e-300) where al <= be (stable in both tails)."""
+    al, be = np.broadcast_arrays(al, be)
     up = be > 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.where(up, np.exp(special.log_ndtr(-be)) - np.exp(special.log_ndtr(-al)),
-                     special.ndtr(al) - special.ndtr(be))
+    d = np.empty(al.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):  # each branch only where it is used
+        d[up] = np.exp(special.log_ndtr(-be[up])) - np.exp(special.log_ndtr(-al[up]))
+        lo = ~up
+        d[lo] = special.ndtr(al[lo]) - special.ndtr(be[lo])
         return np.log(np.maximum(d, 1e-300))
 
 
