@@ -50,12 +50,10 @@ def _row(ms):
 
 def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, label, level=None):
     """Leave-one-unit-out: life model (grid posterior) and UKF on it; units with a failure are scored."""
-    from hd_prognostic.lifemodel import LifeModel, UnitEvents, predict_history
+    from hd_prognostic.lifemodel import LifeModel, UnitEvents
 
-    per_grid, per_ukf, per_plug, hists = [], [], [], {}
-    for i, u in enumerate(units):
-        if u.events.failure is None:
-            continue
+    def fold(i):
+        u = units[i]
         t0 = time.perf_counter()
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
@@ -65,9 +63,6 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
         sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
-        per_grid.append(sg)
-        per_ukf.append(su)
-        per_plug.append(sp)
         if progress:
             print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
@@ -75,7 +70,46 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
                   f"{sp['coverage_p5_p95']:.2f} (ESS {m.fit_info['parameter_uncertainty'].get('ess', 0):.0f}, "
                   f"threshold {m.threshold})"
                   f"  [{time.perf_counter() - t0:.1f} s]", flush=True)
-    return per_grid, per_ukf, per_plug
+        return sg, su, sp
+
+    res = _run_folds(fold, [i for i, u in enumerate(units) if u.events.failure is not None])
+    return [r[0] for r in res], [r[1] for r in res], [r[2] for r in res]
+
+
+JOBS = [1]  # processes for the leave-one-unit-out folds (--jobs)
+
+
+def _run_folds(fold, items):
+    """``[fold(x) for x in items]``, in ``JOBS[0]`` forked processes when > 1 (each fold is seeded on its own, so
+    the results are those of the sequential loop, in the same order; progress lines interleave)."""
+    jobs = min(JOBS[0], len(items))
+    if jobs <= 1:
+        return [fold(x) for x in items]
+    import multiprocessing as mp
+    import pickle
+    import tempfile
+
+    ctx = mp.get_context("fork")  # the fold closure is not pickled: each child runs its share and writes the results
+    tmp = Path(tempfile.mkdtemp(prefix="bench_prog_folds_"))
+
+    def child(k):
+        out = {x: fold(x) for x in items[k::jobs]}
+        (tmp / f"{k}.pkl").write_bytes(pickle.dumps(out))
+
+    procs = [ctx.Process(target=child, args=(k,)) for k in range(jobs)]
+    for pr in procs:
+        pr.start()
+    for pr in procs:
+        pr.join()
+    got = {}
+    for k, pr in enumerate(procs):
+        f = tmp / f"{k}.pkl"
+        if pr.exitcode != 0 or not f.is_file():
+            raise RuntimeError(f"bench prognostics: fold process {k} failed (exit code {pr.exitcode})")
+        got.update(pickle.loads(f.read_bytes()))
+        f.unlink()
+    tmp.rmdir()
+    return [got[x] for x in items]
 
 
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
@@ -238,11 +272,14 @@ def main(argv=None) -> int:
                     help="NASA / Virkler: fit the observable threshold's level instead of taking it from the failure "
                          "definition (80 %% of rated capacity, 49.8 mm)")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="processes for the leave-one-unit-out folds (same results as 1, in the same order)")
     ap.add_argument("--no-reference", action="store_true")
     args = ap.parse_args(argv)
     DRAWS[0] = args.draws
     THRESHOLD[0] = args.threshold
     PATH[0] = args.path
+    JOBS[0] = args.jobs
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
@@ -339,10 +376,8 @@ def _louo_subset(units, eols, args, name, level=None):
     """Leave-one-unit-out scoring the units in ``eols`` only (each fit uses all the other units)."""
     from hd_prognostic.lifemodel import LifeModel, UnitEvents
 
-    per_grid, per_ukf, per_plug = [], [], []
-    for i, u in enumerate(units):
-        if u.unit not in eols:
-            continue
+    def fold(i):
+        u = units[i]
         t0 = time.perf_counter()
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed, threshold=THRESHOLD[0],
@@ -351,15 +386,15 @@ def _louo_subset(units, eols, args, name, level=None):
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
         sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
-        per_grid.append(sg)
-        per_ukf.append(su)
-        per_plug.append(sp)
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{sp['coverage_p5_p95']:.2f} (threshold {sg['threshold']})  [{time.perf_counter() - t0:.1f} s]",
               flush=True)
-    return per_grid, per_ukf, per_plug
+        return sg, su, sp
+
+    res = _run_folds(fold, [i for i, u in enumerate(units) if u.unit in eols])
+    return [r[0] for r in res], [r[1] for r in res], [r[2] for r in res]
 
 
 if __name__ == "__main__":
