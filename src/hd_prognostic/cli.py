@@ -420,7 +420,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "maximum-likelihood one (same parameter count, so also the AIC choice)")
     p.add_argument("--path", choices=("power", "paris", "auto"), default="power",
                    help="latent path family: power law, crack-growth (Paris-type, accelerating to a finite-time "
-                        "blow-up) shape, or auto: both fitted, the lower AIC kept (the Paris likelihood costs ~10x)")
+                        "blow-up) shape, or auto: both fitted, the lower AIC kept (a fit costs ~5x the power law's)")
     p.add_argument("--failure-level", type=float, default=None, metavar="HI",
                    help="when failure is defined as the measured HI reaching a known level (e.g. 1.6 Ah, 0.0498 m): "
                         "that level, the observable threshold's median (not fitted then)")

@@ -451,7 +451,12 @@ class _Batch:
         if not resid and zc is not None and zc[0] is z and zc[1] == key:
             return zc[2]
         # X = h(exp(z + lx)) / D0 (the arithmetic of _paris_h, in place)
-        X = np.add(z[self.idx], self.lx[:, None])
+        shp = (len(self.idx), z.shape[1])
+        buf = self._zbuf if getattr(self, "_zbuf", None) is not None and self._zbuf[0].shape == shp else None
+        if buf is None:  # work arrays kept between calls (same grid size): no new pages per evaluation
+            buf = self._zbuf = (np.empty(shp), np.empty((shp[0], 3, shp[1])))
+        X = np.take(z, self.idx, axis=0, out=buf[0])
+        X += self.lx[:, None]
         np.exp(X, out=X)
         np.minimum(X, _PARIS_UMAX, out=X)
         np.negative(X, out=X)
@@ -460,7 +465,7 @@ class _Batch:
         np.expm1(X, out=X)
         X *= D0
         N, n = X.shape
-        V = np.empty((N, 3 if resid else 1, n))
+        V = buf[1] if resid else buf[1][:, :1]
         xt = V[:, 0]  # prewhitened: X_j - rho X_(j-1) in a chain, sqrt(1 - rho^2) X_j at a chain start
         np.multiply(X[:-1], rho, out=xt[1:])
         np.subtract(X[1:], xt[1:], out=xt[1:])
@@ -575,7 +580,7 @@ class _Batch:
                 mf = ma * (1 - rn) + c * (Lf - rn * Lk) + rn * self.y_last[fl, None]
             vf = (1 - rn) ** 2 * va + sig * sig * (1 - rn * rn) / (1 - rho * rho)
             al = (sg * mf - sg * Y0) / np.sqrt(sY * sY + vf)
-            be = np.broadcast_to((M[fl] - sg * Y0) / sY, al.shape)
+            be = (M[fl] - sg * Y0) / sY  # (units, 1): one value per unit
             out[fl] = _log_sub_ndtr(al, be)
         ce = np.isfinite(self.lcens)
         if ce.any():
@@ -629,14 +634,20 @@ class _Batch:
 
 
 def _log_sub_ndtr(al: np.ndarray, be: np.ndarray) -> np.ndarray:
-    """log(Phi(al) - Phi(be)), floored at log(1e-300) where al <= be (stable in both tails)."""
-    al, be = np.broadcast_arrays(al, be)
-    up = be > 0
-    d = np.empty(al.shape)
+    """log(Phi(al) - Phi(be)), floored at log(1e-300) where al <= be (stable in both tails). ``be`` may have
+    fewer elements than ``al`` (one per row): its terms are evaluated once per element of ``be``."""
+    al, be = np.asarray(al, float), np.asarray(be, float)
+    shape = np.broadcast_shapes(al.shape, be.shape)
+    al = np.broadcast_to(al, shape)
+    up_b = be > 0
     with np.errstate(divide="ignore", invalid="ignore"):  # each branch only where it is used
-        d[up] = np.exp(special.log_ndtr(-be[up])) - np.exp(special.log_ndtr(-al[up]))
+        s_be = np.where(up_b, np.exp(special.log_ndtr(-be)), special.ndtr(be))  # Phi(-be) or Phi(be)
+        up = np.broadcast_to(up_b, shape)
+        s_be = np.broadcast_to(s_be, shape)
+        d = np.empty(shape)
+        d[up] = s_be[up] - np.exp(special.log_ndtr(-al[up]))
         lo = ~up
-        d[lo] = special.ndtr(al[lo]) - special.ndtr(be[lo])
+        d[lo] = special.ndtr(al[lo]) - s_be[lo]
         return np.log(np.maximum(d, 1e-300))
 
 
