@@ -299,10 +299,13 @@ def decimation_for(fs: float, fs_model: float | None, where: str) -> int:
 
 
 def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_len: int = 16,
-               names: Sequence[str] | None = None) -> list[Segment]:
+               names: Sequence[str] | None = None, speed_timing=None) -> list[Segment]:
     """Split a Mission into gap-free, anti-aliased, decimated :class:`Segment` s at ``fs_model`` Hz.
 
-    ``names``: the feature columns of ``Segment.F`` (default :data:`FEATURES`).
+    ``names``: the feature columns of ``Segment.F`` (default :data:`FEATURES`). ``speed_timing``: the
+    model's ``config.json:speed_timing`` (dict or :class:`hd_twin.speedtiming.SpeedTiming`; None / empty:
+    speeds as logged): the listed logged speeds are re-timed per segment at the bag rate, before anything
+    else sees them (the streaming twin does the same causally).
 
     Segments shorter than ``min_len`` samples (after decimation) are dropped.
     Raises ValueError naming the bag when the mission is unusable.
@@ -324,6 +327,10 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
                          "finite" + (" (Q_red is NaN throughout: no output torque sensor, so the twin can be "
                                      "neither trained nor scored on this bag)" if not np.isfinite(Q_all).any() else ""))
     sos = antialias_sos(fs, dec)
+    from .speedtiming import SpeedTiming  # noqa: PLC0415
+
+    timing = speed_timing if isinstance(speed_timing, SpeedTiming) else SpeedTiming.from_config(speed_timing)
+    t_all = np.asarray(mission.t, dtype=np.float64)
     out: list[Segment] = []
     for a, b in segment_bounds(mission.segment):
         if b - a < max(3, min_len * dec):
@@ -331,6 +338,7 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
         X = bridge_nan(X_all[a:b])
         absent = ~np.isfinite(X).all(axis=0)  # inputs with no finite sample in this segment
         X[:, absent] = 0.0
+        X = timing.apply_X(X, t_all[a:b])  # X itself when the model has no re-timing
         Q = Q_all[a:b].copy()
         m = finite[a:b].copy()
         Qb = bridge_nan(Q)

@@ -67,6 +67,10 @@ class StreamingTwin:
         pp = self.config.get("physics_path")
         self.physpath = PhysicsPath.from_dict(pp)
         self.gate = float((pp or {}).get("gate", 1.0)) if self.physpath.active else 1.0
+        from .speedtiming import SpeedTiming  # noqa: PLC0415
+
+        self.speed_timing = SpeedTiming.from_config(self.config.get("speed_timing"),
+                                                    f"{self.model_dir}/config.json speed_timing")
         self.reset(fs_in)
 
     @property
@@ -80,6 +84,8 @@ class StreamingTwin:
         self.fs_in = float(fs_in) if fs_in is not None else self.fs_model
         self.decimation = D.decimation_for(self.fs_in, self.fs_model, str(self.model_dir))
         self._sos = D.antialias_sos(self.fs_in, self.decimation)
+        # causal re-timing of the logged speeds at the input rate (None: speeds as logged)
+        self._retimer = self.speed_timing.streamer(self.fs_in) if self.speed_timing.active else None
         self._zi = None
         self._last = None
         self._prev = None
@@ -126,6 +132,8 @@ class StreamingTwin:
                     X[:, j] = np.where(ok_idx >= 0, X[np.maximum(ok_idx, 0), j], last)
                     X[~np.isfinite(X[:, j]), j] = 0.0 if j != 5 else float(self.params["T_ref"])
             self._last = X[-1].copy()
+        if self._retimer is not None:
+            X = self._retimer.step(X)
         Xf = self._filter(X)
         idx = np.arange((-self._phase) % self.decimation, len(X), self.decimation)
         self._phase = (self._phase + len(X)) % self.decimation
