@@ -323,6 +323,8 @@ def evaluate(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, residuals: boo
     outs = predict_outputs(pinn, segs, norm, batch_samples) if outs is None else outs
     yt = np.concatenate([np.where(s.mask, s.Q_red, np.nan) for s in segs])
     met = q_metrics(yt, np.concatenate(q_from_outputs(pinn, segs, outs)))
+    # measured samples within half a derivative window of a segment edge (hd_twin.data.edge_samples): not scored
+    met["edge_excluded"] = int(sum(int(s.edge.sum()) for s in segs if s.edge is not None))
     met["gate"] = float(pinn.gate)
     if residuals:
         met.update(residual_rms(pinn, segs, norm, outs=outs))
