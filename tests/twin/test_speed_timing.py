@@ -160,3 +160,18 @@ def test_trained_twin_stores_the_entry_and_streams_on_the_retimed_speeds(tmp_pat
     assert np.allclose(q_new, q_ref, rtol=0, atol=1e-6 * np.max(np.abs(q_ref)))
     old.reset(m.fs)
     assert not np.allclose(old.step(X)["Q_red"], q_ref, rtol=0, atol=1e-6 * np.max(np.abs(q_ref)))
+
+
+def test_model_config_for_training_takes_the_entry(tmp_path):
+    """`hdphm train --model-config OUT/twin/config.json` (discovery's version) trains on the re-timed speeds."""
+    from hd_twin.cli import _model_config
+
+    entry = {"omega_m": {"tau_s": 3e-3, "se": 1e-4}, "window_s": 0.02}
+    p = tmp_path / "config.json"
+    p.write_text(json.dumps({"declared_effects": ["inertia"], "extra_terms": [], "speed_timing": entry}))
+    assert _model_config(str(p))["speed_timing"] == entry
+    p.write_text(json.dumps({"declared_effects": ["inertia"], "speed_timing": {"omega_m": {"tau_s": 1.0}}}))
+    with pytest.raises(SystemExit, match="half the derivative window"):
+        _model_config(str(p))
+    p.write_text(json.dumps({"declared_effects": ["inertia"]}))
+    assert "speed_timing" not in _model_config(str(p))
