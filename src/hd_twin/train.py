@@ -328,7 +328,7 @@ def evaluate(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, residuals: boo
     met["gate"] = float(pinn.gate)
     if residuals:
         met.update(residual_rms(pinn, segs, norm, outs=outs))
-    prior = q_metrics(yt, physics_baseline(segs, pinn.params, pinn.effects))
+    prior = q_metrics(yt, physics_baseline(segs, pinn.params, pinn.declared_effects))
     if pinn.physpath.active:
         met["physics_only"] = q_metrics(yt, np.concatenate(segment_phys(pinn, segs)))
         met["physics_prior"] = prior
