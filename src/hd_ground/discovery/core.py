@@ -657,6 +657,9 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
                       base_idx, groups, sel, eps0: float, rng: tuple[float, float]) -> tuple | None:
     """The friction transition width identified again given the selected groups (CV profile + jackknife).
 
+    The width is one parameter of every term on the friction direction: the selected groups' tanh(omega_m /
+    eps0) columns follow it in the search.
+
     The baseline's width is first identified before any effect is modelled: an undeclared effect several
     times the noise floor is then in the residual and blurs the profile. Given the selected groups' columns
     the width is searched again over the same range. Returns (eps, sd, note) when it is identified and
@@ -666,14 +669,22 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
         return None
     cols_sel = [c for gi in sel for c in groups[gi][1]]
     s_rows = _take(sig, srows)
-    Xg = X_all[srows][:, cols_sel]
     bc = baseline_columns(target, avail, declared, extra_terms, 1.0, twin_params)[0]
     names = [bc[j].param for j in keep] + [f"g{j}" for j in cols_sel]
+
+    def with_eps(b, eps):
+        # the selected groups' friction direction tanh(omega_m / eps0) follows the width under search
+        if b.get("op") == "prod":
+            return {**b, "factors": [with_eps(f, eps) for f in b["factors"]]}
+        if b.get("op") == "sgn" and b.get("var") == "omega_m" and b.get("eps") == eps0:
+            return {**b, "eps": float(eps)}
+        return b
 
     def design(sh):
         Xb = _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, sh["eps"], twin_params)[0],
                               s_rows)[:, keep]
-        return np.column_stack([Xb, Xg])
+        Xg = [basis_matrix([with_eps(b, sh["eps"]) for b in groups[gi][0].basis], s_rows) for gi in sel]
+        return np.column_stack([Xb] + Xg)
     f = fit_separable(y[srows], design, names, block[srows], [Shape("eps", rng[0], rng[1], log=True, n_grid=12)])
     e1, sd1 = float(f.shape["eps"]), float(f.shape_sd["eps"])
     if not f.identified["eps"] or abs(e1 - eps0) <= sd1:
