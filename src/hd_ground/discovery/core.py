@@ -662,7 +662,7 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
 
     The baseline's width is first identified before any effect is modelled: an undeclared effect several
     times the noise floor is then in the residual and blurs the profile. Given the selected groups' columns
-    the width is searched again over the same range. Returns (eps, sd, note) when it is identified and
+    the width is searched again over the same range. Returns (eps, sd, note, eps0) when it is identified and
     differs from ``eps0`` by more than its own SD, else None. Skipped when a selected group re-identifies
     the width itself (it replaces the baseline's Coulomb column, e.g. Stribeck)."""
     if any(getattr(groups[gi][0], "replace_idx", ()) for gi in sel):
@@ -692,7 +692,7 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
     note = (f"friction transition width identified again given the selected effects: eps {eps0:.3g} -> {e1:.3g} +- "
             f"{sd1:.2g} rad/s (CV profile over the same range, block jackknife; the first estimate had the "
             "undeclared effects in its residual); candidates and selection redone with it")
-    return e1, sd1, note
+    return e1, sd1, note, float(eps0)
 
 
 def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: list[str] | None = None,
@@ -700,8 +700,9 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                     opt: Options | None = None, transition_width: tuple | None = None) -> SignalResult:
     """Run discovery for one target signal; see the module docstring.
 
-    ``transition_width``: (eps, sd, note) of a friction transition width already identified given the
-    selected effects (internal: set by the second pass, see :func:`_reidentify_width`)."""
+    ``transition_width``: (eps, sd, note, first eps) of a friction transition width already identified given
+    the selected effects (internal: set by the second pass, see :func:`_reidentify_width`); ``error_before``
+    stays the baseline's at its first width."""
     opt = opt or Options()
     ds0, heldout0 = ds, heldout
     declared = list(DEFAULT_DECLARED.get(target, []) if declared is None else declared)
@@ -819,6 +820,13 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     cols = [cols[j] for j in keep]
     Xb_all = Xb_all[:, keep]
     beta_b = _lstsq(Xb_all[fit], y[fit])
+    # the error "before" is the baseline's as identified on its own: in a second pass (width identified again
+    # given the effects) the baseline at its first width, so the width's second look is credited to "after"
+    Xb_before, beta_before = Xb_all, beta_b
+    if transition_width is not None and len(transition_width) > 3:
+        Xb_before = _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, float(transition_width[3]),
+                                                      twin_params)[0], sig)[:, keep]
+        beta_before = _lstsq(Xb_before[fit], y[fit])
     r_base = y - Xb_all @ beta_b
     base_params = {c.param: float(b) for c, b in zip(cols, beta_b)}
     if eps_fit is not None:
@@ -991,7 +999,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             sig_eval = sig.replaced(theta_m=sig["theta_m"] + shift)
         X_eval = X_all if sig_eval is sig else np.concatenate(
             [Xb_all] + [basis_matrix(c.basis, sig_eval) for c, _ in groups], 1) if groups else Xb_all
-        r_before = y - Xb_all @ beta_b
+        r_before = y - Xb_before @ beta_before
         r_after = y - X_eval[:, idx] @ beta
         eb = _err(r_before[score], y[score])
         ea = _err(r_after[score], y[score]) if terms else dict(eb)
