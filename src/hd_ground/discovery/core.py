@@ -18,7 +18,10 @@ plots and the report). Steps, for one measured target signal:
    current error, does so in most folds and has identified coefficients (their
    leave-one-block-out jackknife Wald statistic reaches the 3-sigma chi^2
    quantile); a backward pass drops groups that became redundant or lost
-   identification. Alternatives of one family compete; one survives.
+   identification. Alternatives of one family compete; one survives. A shaped group that is not identified
+   in the final model closes its family and the selection is made again; the friction transition width is
+   identified again given the selected groups, and when it moves beyond its SD, candidates and selection are
+   redone with it (one second pass).
 5. The selected model is refitted on all fit data and scored on the held-out
    blocks/bags against the baseline.
 """
