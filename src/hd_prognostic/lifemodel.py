@@ -53,6 +53,7 @@ exposure ``E_f = E_ref (D / r)^(1/b)`` and the failure time from the unit's own 
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 from dataclasses import dataclass, field
@@ -79,13 +80,21 @@ class UnitEvents:
     inspections: list[tuple[float, str, float]] = field(default_factory=list)  # (t, quantity, value SI)
 
 
+def _open_text(p: Path) -> io.StringIO:
+    """The whole file as text for :mod:`csv`; a file that is not UTF-8 text is named in the error."""
+    try:
+        return io.StringIO(p.read_text(encoding="utf-8-sig"), newline="")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{p}: not UTF-8 text (byte {e.start}: {e.reason}); expected a CSV file") from None
+
+
 def read_events(path: str | Path) -> dict[str, UnitEvents]:
     """Parse an events CSV (columns :data:`EVENT_COLUMNS`); every error names the file and row."""
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"{p}: events file not found")
     out: dict[str, UnitEvents] = {}
-    with open(p, newline="") as f:
+    with _open_text(p) as f:
         rd = csv.reader(f)
         try:
             head = [h.strip() for h in next(rd)]
@@ -216,6 +225,11 @@ def attach_events(units: list[UnitHistory], events: dict[str, UnitEvents], sourc
             if not (u.t < ev.failure).any():
                 raise ValueError(f"{source}: {u.unit}: failure at {ev.failure:g} is not after its first record "
                                  f"({u.t[0]:g})")
+            gap = ev.failure - u.t[-1]
+            if gap > max(1.0, u.t[-1] - u.t[0]):  # more unrecorded life than recorded: say so, keep the event
+                notes.append(f"{source}: {u.unit}: failure at {ev.failure:g} is {gap:g} after its last "
+                             f"health-indicator record ({u.t[-1]:g}); the exposure in between is extrapolated "
+                             f"at the unit's median rate")
             late = u.t >= ev.failure
             if late.any():
                 notes.append(f"{u.unit}: {int(late.sum())} record(s) at or after the failure at {ev.failure:g} not used")
@@ -232,7 +246,7 @@ def read_hi_csv(path: str | Path) -> list[UnitHistory]:
     if not p.is_file():
         raise FileNotFoundError(f"{p}: health-indicator CSV not found")
     rows: dict[str, list[tuple[float, float, float]]] = {}
-    with open(p, newline="") as f:
+    with _open_text(p) as f:
         rd = csv.reader(f)
         try:
             head = [h.strip() for h in next(rd)]

@@ -87,6 +87,18 @@ def test_events_errors_name_file_and_row(tmp_path, text, match):
     assert hdphm(["prognostic", "fit", str(p), "--events", str(p), "--out", str(tmp_path / "m.json")]) == 2
 
 
+def test_events_and_hi_csv_not_text_named(tmp_path):
+    p = tmp_path / "ev.csv"
+    p.write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(ValueError, match="ev.csv: not UTF-8 text"):
+        read_events(p)
+    with pytest.raises(ValueError, match="ev.csv: not UTF-8 text"):
+        read_hi_csv(p)
+    # a byte-order mark (spreadsheet export) is text, not part of the first column's name
+    p.write_text("\ufeffactuator_id,mission_index,event,quantity,value\nA,3,failure,,\n", encoding="utf-8")
+    assert read_events(p)["A"].failure == 3.0
+
+
 def test_events_roundtrip_and_docs_example(tmp_path):
     from pathlib import Path
 
@@ -128,6 +140,12 @@ def test_attach_events_drops_records_after_failure():
     n = len(u.t)
     notes = attach_events([u], {u.unit: UnitEvents(failure=float(n - 3))})
     assert len(u.t) == n - 3 and "not used" in notes[0]
+    # a failure long after the last record is kept (interval-censored over unrecorded life) but noted
+    units, _ = synth_units(1, seed=4, censor_frac=0.0)
+    u = units[0]
+    far = float(u.t[-1] + 3 * (u.t[-1] - u.t[0]))
+    notes = attach_events([u], {u.unit: UnitEvents(failure=far)})
+    assert len(u.t) == n and u.events.failure == far and "after its last health-indicator record" in notes[0]
 
 
 @pytest.mark.parametrize("n_draws", [0, 4])
