@@ -129,6 +129,59 @@ def speed_timing(missions: list[Mission], window_s: float = 0.02) -> tuple[dict[
     return lags, notes
 
 
+
+def angle_resolution(theta: np.ndarray, segment: np.ndarray | None = None, *, tol: float = 0.05,
+                     min_share: float = 0.9) -> float:
+    """Quantisation step [rad] of a logged angle, or 0.0 if it is not visibly quantised.
+
+    An encoder logs whole counts: every non-zero increment of the angle within a segment is then a
+    whole multiple of one step q (the smallest increment). Accepted when at least ``min_share`` of the
+    non-zero increments lie within ``tol`` steps of a whole multiple of q; a continuous (noisy,
+    interpolated or filtered) angle fails that test and gives 0.0.
+    """
+    x = np.asarray(theta, float)
+    d = np.abs(np.diff(x))
+    if segment is not None:
+        seg = np.asarray(segment)
+        d = d[seg[1:] == seg[:-1]]
+    d = d[np.isfinite(d) & (d > 0)]
+    if len(d) < 20:
+        return 0.0
+    # the smallest increments, robust to a few rounding leftovers far below the step
+    q = float(np.median(d[d <= 1.5 * np.quantile(d, 0.05)]))
+    if not q > 0:
+        return 0.0
+    k = d / q
+    if np.mean(np.abs(k - np.round(k)) < tol) < min_share:
+        return 0.0
+    return q
+
+
+def play(x: np.ndarray, r: float, segment: np.ndarray | None = None) -> np.ndarray:
+    """Play (backlash) operator of half-width ``r`` on the time-ordered ``x``: the output follows x only once
+    x has moved more than r past it, so reversals of x smaller than 2 r leave it unchanged. Restarts at
+    each new ``segment`` (at the segment's first sample)."""
+    x = np.asarray(x, float)
+    n = len(x)
+    if n == 0 or not r > 0:
+        return x.copy()
+    seg = np.zeros(n, int) if segment is None else np.asarray(segment)
+    start = np.r_[True, seg[1:] != seg[:-1]].tolist()
+    xs = x.tolist()
+    o = [0.0] * n
+    c = xs[0]
+    for i in range(n):
+        v = xs[i]
+        if start[i] or not (c == c):  # a new segment (or a NaN carried): restart on the sample
+            c = v
+        elif v > c + r:
+            c = v - r
+        elif v < c - r:
+            c = v + r
+        o[i] = c
+    return np.asarray(o)
+
+
 def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
                        speed_lags: dict[str, float] | None = None) -> tuple[dict[str, np.ndarray], list[str]]:
     """Signal table of one mission (full length, may contain NaN) and notes on what was done.
@@ -167,6 +220,13 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
     # delta_m = ... - r_m phi), so K and c come out positive
     s["windup"] = -s["phi"]
     s["windup_dot"] = -s["phi_dot"]
+    # the twist as its quantised encoders can resolve it (errors in variables): a reversal of the measured
+    # twist by up to its measurement step (output-encoder step + motor-encoder step / N) and back is a count
+    # toggling, not a reversal of the load; the twist-side hysteresis state is also tried on this play of
+    # half-width one step (1.001: the steps' float rounding), equal to the twist where neither angle is
+    # visibly quantised
+    res_w = angle_resolution(s["theta_f"], seg) + angle_resolution(s["theta_m"], seg) / N
+    s["windup_q"] = play(s["windup"], 1.001 * res_w, seg) if res_w > 0 else s["windup"].copy()
     from hd_bag.mission import MAX_TWIST_OFFSET
 
     ph = s["phi"][np.isfinite(s["phi"])]
@@ -176,7 +236,7 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
         # analysed; the motor side (tau_m vs theta_m, omega_m) is unaffected
         notes.append(f"{name}: theta_f - theta_m / N has median {float(np.median(ph)):.6g} rad (> {MAX_TWIST_OFFSET:g} "
                      "rad: encoders without a common zero); twist and Q_red left out of the analysis")
-        for k in ("phi", "phi_dot", "windup", "windup_dot", "Q_red"):
+        for k in ("phi", "phi_dot", "windup", "windup_dot", "windup_q", "Q_red"):
             s[k] = np.full(n, np.nan)
         s.pop("Q_red_over_N", None)
     temp = m.temperature_on_t("gearbox")

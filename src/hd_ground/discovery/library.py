@@ -396,6 +396,22 @@ def twist_shape_candidates(ctx: LibraryContext) -> list[Candidate]:
         # bounds d_h only from below: reported with that note, not a reason to reject the loop
         nuisance=("d_h",), make_basis=dahl_basis,
     ))
+    if "windup_q" in ctx.available:
+        # the same state driven by the twist as its encoders resolve it (data.signals_of_mission: count
+        # toggles of the quantised twist are not load reversals); an alternative of the same family, the
+        # CV profile and selection decide between them
+        def dahl_q_basis(sh):
+            return [{"op": "var", "var": state_var("windup_q", sh["d_h"])}]
+
+        out.append(Candidate(
+            "hysteresis", "hysteresis", "windup", None, dahl_q_basis({"d_h": np.sqrt(w_lo * w_hi)}),
+            "T_h s(w_q; d_h), ds/dw_q = (sgn(dw_q) - s) / d_h, w_q: the twist w = theta_m/N - theta_f through a "
+            "play of one encoder step (reversals within the twist's resolution are not counted)",
+            lambda c: {"T_h": float(c[0])}, requires=("windup_q",),
+            positive=True, nonlinear={"d_h": float(np.sqrt(w_lo * w_hi))},
+            shapes=[Shape("d_h", w_lo, max(2.0 * ctx.windup_scale, 4 * w_lo), log=True, n_grid=12)],
+            nuisance=("d_h",), make_basis=dahl_q_basis,
+        ))
     if "windup_dot" in ctx.available and ctx.windup_dot_scale > 0:
         v_lo = max(1e-4 * ctx.windup_dot_scale, 1e-12)
         v_hi = 0.5 * ctx.windup_dot_scale
