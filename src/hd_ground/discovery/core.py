@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hd_twin.identify import Shape, fit_separable, presliding_state
+from hd_twin.identify import Shape, fit_separable, presliding_state, vp_shape
 from hd_twin.terms import basis_matrix, evaluate_terms
 
 from .data import Dataset, DiscoveryError
@@ -829,13 +829,15 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     s_rows = _take(sig, srows)
     y_ref = float(np.sqrt(np.mean(y[srows] ** 2)))
 
+    def _shape_design(gi, cur_idx):
+        cand, cix = groups[gi]
+        Xc = X_all[srows][:, [c for c in cur_idx if c not in cand.replace_idx]]
+        return lambda sh: np.column_stack([Xc, basis_matrix(cand.make_basis(sh), s_rows)])
+
     def _shape_fit(gi, cur_idx, jackknife):
         cand, cix = groups[gi]
         keep_c = [c for c in cur_idx if c not in cand.replace_idx]
-        Xc = X_all[srows][:, keep_c]
-
-        def design(sh):
-            return np.column_stack([Xc, basis_matrix(cand.make_basis(sh), s_rows)])
+        design = _shape_design(gi, cur_idx)
         names = [f"c{j}" for j in keep_c] + [f"g{j}" for j in cix]
         return fit_separable(y[srows], design, names, ds.block[srows], cand.shapes, jackknife=jackknife,
                              positive=[len(keep_c) + len(cix) - 1] if cand.positive else [])
@@ -884,6 +886,14 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             trace.append({"step": "drop (shape unidentified)", "candidate": f"{cand.name}[{cand.family}]",
                           "note": note})
             statements.append(f"{cand.name}: its shape is not identified in the final model ({note}); left out")
+    # the final shapes' uncertainty by variable projection on the cross-validated residuals (sandwich), and
+    # whether a least-squares refinement of the same CV objective runs into a degenerate optimum (reported)
+    for gi in sel:
+        cand, cix = groups[gi]
+        if cand.shapes:
+            statements += shape_uncertainty(cand, lambda sh, gi=gi: _shape_design(gi, _model(
+                base_idx, groups, [gj for gj in sel if gj != gi]))(sh), y[srows], ds.block[srows],
+                sf["omega_m"] if "omega_m" in sf else None, sf.get("alpha_m"))
     while True:
         idx = _model(base_idx, groups, sel)
         beta_full = np.zeros(X_all.shape[1])  # coefficients of every column, 0 for those not in the model
@@ -1001,6 +1011,54 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         offsets=offsets, comparisons=comp, plot=plot,
     )
 
+
+
+def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray, omega: np.ndarray | None = None,
+                      alpha: np.ndarray | None = None) -> list[str]:
+    """Uncertainty of a selected group's identified shape (``hd_twin.identify.vp_shape``); statements.
+
+    At the profile search's choice: the block-robust sandwich standard error of every shape parameter from
+    the Jacobian of the leave-one-block-out residuals (recorded as ``<name>_se`` in the term's parameters;
+    the block jackknife ``<name>_sd`` restarts from the full-data optimum and misses flat directions of the
+    CV surface). Then a least-squares refinement of the same CV objective from that choice: when it lowers
+    the CV error only by running a parameter onto a bound of its range (a degenerate optimum) or leaves a
+    parameter uncertain beyond its size, the parameter is reported as weakly identified (``<name>_weak`` =
+    1) and the choice is kept (a bound is not an estimate). For a speed shape (omega_s): how many fit rows
+    carry the curve in each octave of speed around omega_s, and at what acceleration (where J alpha_m dwarfs
+    the friction, the curve there is interpolated by its law rather than measured).
+    """
+    rows = y.shape[0]
+    start = {s.name: float(cand.nonlinear[s.name]) for s in cand.shapes}
+    try:
+        at = vp_shape(y, design, block, cand.shapes, start, refine=False)
+        ref = vp_shape(y, design, block, cand.shapes, start, refine=True)
+    except (np.linalg.LinAlgError, ValueError) as exc:  # a singular design at the chosen shape: say so, go on
+        return [f"{cand.name}: shape uncertainty not computed ({type(exc).__name__}: {exc})"]
+    weak = list(dict.fromkeys(at.weak + ref.weak))
+    for k in at.shape:
+        cand.nonlinear[f"{k}_se"] = at.se[k]
+        cand.nonlinear[f"{k}_weak"] = float(k in weak)
+    out = [f"{cand.name}: shape " + ", ".join(f"{k} = {v:.3g} +- {at.se[k]:.2g}" for k, v in at.shape.items())
+           + f" (sandwich SE of the CV residuals' variable projection, {rows} rows)"]
+    moved = {k: v for k, v in ref.shape.items() if abs(v - at.shape[k]) > 1e-6 * max(abs(v), 1e-12)}
+    if moved:
+        out.append(f"{cand.name}: a least-squares refinement of the CV objective moves the shape to "
+                   + ", ".join(f"{k} = {v:.3g}" for k, v in ref.shape.items())
+                   + f" (CV RMSE {at.cv_rmse:.4g} -> {ref.cv_rmse:.4g})"
+                   + ("; " + "; ".join(ref.notes) + "; the profile choice is kept" if ref.weak else ""))
+    if weak:
+        out.append(f"{cand.name}: weakly identified on these data: {', '.join(weak)}"
+                   + ("; " + "; ".join(at.notes) if at.notes else ""))
+    if omega is not None and "omega_s" in at.shape:
+        ws, aw = at.shape["omega_s"], np.abs(omega)
+        parts = []
+        for a, b in ((0.25, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, 4.0)):
+            band = (aw >= a * ws) & (aw < b * ws)
+            acc = (f", |alpha_m| {np.median(np.abs(alpha[band])):.3g}" if alpha is not None and band.any() else "")
+            parts.append(f"{a * ws:.3g}..{b * ws:.3g} rad/s: {int(band.sum())} rows{acc}")
+        out.append(f"{cand.name}: fit rows per octave of |omega_m| around omega_s (median |alpha_m| in rad/s^2; where "
+                   "J alpha_m dwarfs the friction, the curve is carried by its law, not measured): " + "; ".join(parts))
+    return out
 
 
 def baseline_cv_rmse(ds: Dataset, heldout: np.ndarray, rows: np.ndarray) -> float | None:
