@@ -315,8 +315,8 @@ def _greedy(bags: list[str], signal: str) -> dict:
     if ds.speed_lags:  # the same signals discover reads (its speed-timing choice, made on the fit bags)
         ds = choose_speed_timing(dataset_from_missions(ms, [str(b) for b in bags], retime_speeds=False), ds, ho)[0]
     if ALPHA_WINDOW == "identify":  # ... and the same acceleration (its derivative-window choice, on the fit bags)
-        ds = choose_alpha_window(lambda win, re=bool(ds.speed_lags): dataset_from_missions(
-            ms, [str(b) for b in bags], retime_speeds=re, alpha_window_s=win), ds, ho)[0]
+        ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
+            ms, [str(b) for b in bags], retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho)[0]
     still = standstill_rows(ds, Options().standstill_sigmas)[0] if signal == "tau_m" else None
     return greedy_discover(ds, signal, ho, standstill=still)
 

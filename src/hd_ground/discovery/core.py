@@ -188,6 +188,10 @@ def baseline_columns(target: str, avail: set[str], declared: list[str], extra_te
     cols: list[BaselineColumn] = []
     if target == "tau_m":
         cols.append(BaselineColumn("J_eq", None, {"op": "var", "var": "alpha_m"}))
+        if "alpha_m_dot" in avail:
+            # the inertia torque's timing against the logged torque (choose_alpha_window): J alpha_m(t + tau_a)
+            # = J alpha_m + J tau_a alpha_m' to first order; tau_a = J_tau_a / J_eq
+            cols.append(BaselineColumn("J_tau_a", None, {"op": "var", "var": "alpha_m_dot"}))
         if "Q_red_over_N" in avail:
             cols.append(BaselineColumn("inv_eta", None, {"op": "var", "var": "Q_red_over_N"}))
         else:
@@ -1124,14 +1128,18 @@ def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.nda
 
 def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
                         default_s: float = 0.02) -> tuple[Dataset, str]:
-    """The motor acceleration's derivative window, identified on the fit bags by the tau_m baseline's CV error.
+    """The motor acceleration's derivative window and timing, identified on the fit bags by the baseline's CV error.
 
     alpha_m is the smoothed derivative of the logged speed (Savitzky-Golay, quadratic); its window is a
     filter bandwidth, not a property of the drive: too long and J alpha_m lags every fast transient (an
     error of the size of the friction that the friction terms then bend to absorb), too short and the noise
-    of the speed is differentiated into it. ``make(window_s)`` builds the dataset with that window (same
-    speeds and rows as ``ds``). Candidates: windows of 5, 9, 17 and 33 samples at the log rate (the shortest
-    quadratic Savitzky-Golay derivative, doubling) and the default ``default_s``; the one with the lowest
+    of the speed is differentiated into it. With it, the inertia torque's timing against the logged torque
+    (a logger that averages the current over its period while the speed is placed at an angle's sampling
+    instant: half a period, J alpha_m' tau_a, large in fast transients): ``alpha_timing`` adds the column
+    alpha_m' (coefficient J tau_a, first order in tau_a) to the baseline. ``make(window_s, timing)`` builds the
+    dataset (same speeds and rows as ``ds``). Candidates: windows of 5, 9, 17 and 33 samples at the log rate (the
+    shortest quadratic Savitzky-Golay derivative, doubling) and the default ``default_s``, each without and with
+    the timing column; the one with the lowest
     cross-validated error of the plain tau_m baseline on the fit bags (the same rows for all) is used when it
     lowers the CV mean squared error against the default by ``opt.min_gain`` (the rule every baseline change
     follows), else the default stays. Returns the dataset and a statement (empty when nothing was tested)."""
@@ -1144,28 +1152,29 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
     cv_d = baseline_cv_rmse(ds, heldout, ~still)
     if cv_d is None:
         return ds, ""
-    best = (cv_d, default_s, ds)
+    best = (cv_d, default_s, False, ds)
     tried = [f"{default_s * 1e3:.3g} ms: {cv_d:.4g}"]
-    for k in (5, 9, 17, 33):
-        win = k * dt
-        if abs(win - default_s) < 0.5 * dt:
-            continue
-        d2 = make(win)
-        if d2.n != ds.n:
-            continue
-        cv = baseline_cv_rmse(d2, heldout, ~still)
-        if cv is None:
-            continue
-        tried.append(f"{win * 1e3:.3g} ms: {cv:.4g}")
-        if cv < best[0]:
-            best = (cv, win, d2)
-    cv, win, d2 = best
+    for timing in (False, True):
+        for win in [default_s] + [k * dt for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]:
+            if win == default_s and not timing:
+                continue
+            d2 = make(win, timing)
+            if d2.n != ds.n:
+                continue
+            cv = baseline_cv_rmse(d2, heldout, ~still)
+            if cv is None:
+                continue
+            tried.append(f"{win * 1e3:.3g} ms{' + timing' if timing else ''}: {cv:.4g}")
+            if cv < best[0]:
+                best = (cv, win, timing, d2)
+    cv, win, timing, d2 = best
     gain = 1.0 - (cv / cv_d) ** 2 if cv_d > 0 else 0.0
+    what = f"{win * 1e3:.3g} ms" + (" with the inertia torque's timing (J tau_a dalpha_m/dt)" if timing else "")
     if d2 is not ds and gain >= opt.min_gain:
         d2.notes = list(ds.notes)
         d2.speed_lags = dict(ds.speed_lags)
-        return d2, (f"acceleration: the derivative window of alpha_m is identified on the fit bags, {win * 1e3:.3g} ms "
-                    f"(CV RMSE of the tau_m baseline {cv_d:.4g} -> {cv:.4g} N*m, {gain:.1%}, against the default "
-                    f"{default_s * 1e3:.3g} ms; tried {'; '.join(tried)}); used")
+        return d2, (f"acceleration: identified on the fit bags, {what} (CV RMSE of the tau_m baseline {cv_d:.4g} -> "
+                    f"{cv:.4g} N*m, {gain:.1%}, against the default {default_s * 1e3:.3g} ms; tried {'; '.join(tried)}); "
+                    "used")
     return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms) is kept (best "
-                f"alternative {win * 1e3:.3g} ms, CV gain {gain:+.1%} < {opt.min_gain:.0%}; tried {'; '.join(tried)})")
+                f"alternative {what}, CV gain {gain:+.1%} < {opt.min_gain:.0%}; tried {'; '.join(tried)})")

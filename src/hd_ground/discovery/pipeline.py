@@ -122,8 +122,9 @@ def run_discovery(
         ds.notes.append(st_)
     if opt.alpha_window == "identify":
         # the acceleration's derivative window, by the same rule on the fit bags (same speeds as chosen above)
-        ds, st_ = choose_alpha_window(lambda win, re=bool(ds.speed_lags): dataset_from_missions(
-            missions, names, blocks_per_bag=blocks_per_bag, retime_speeds=re, alpha_window_s=win), ds, ho, opt)
+        ds, st_ = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
+            missions, names, blocks_per_bag=blocks_per_bag, retime_speeds=re, alpha_window_s=win,
+            alpha_timing=timing), ds, ho, opt)
         if st_:
             ds.notes.append(st_)
     for n_ in ds.notes:
