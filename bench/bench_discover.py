@@ -203,7 +203,9 @@ def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -
                 add("A_2 / K [rad]", pr["A_2"] / K, P["A2"], 0.20)
                 add("K_a_2 / K^2 [rad/(N*m)]", load["parameters"]["K_a_2"] / K**2, P["A2"] * P["a_T"] / P["T_rated"], 0.35)
             add("phase_2 [rad]", pr["phase_2"], P["psi2"], 0.10, phase=True)
-            add("K [N*m/rad]", K, P["K_out_lin"], 0.10)
+            # the linear stiffness of the world's torsion law: a cubic law's K1 (its slope at zero twist)
+            cub = truth.get("effects", {}).get("cubic_stiffness", {})
+            add("K [N*m/rad]", K, cub["K1"] if cub.get("on") else P["K_out_lin"], 0.10)
     return out
 
 

@@ -181,6 +181,11 @@ class OnnxTwinExpected:
         return float(self.twin.fs_in)
 
     @property
+    def edge_s(self) -> float:
+        """Seconds after a reset whose outputs are the twin's edge samples (``StreamingTwin.edge_s``)."""
+        return float(getattr(self.twin, "edge_s", 0.0))
+
+    @property
     def fs_model(self) -> float:
         """Rate the twin was trained at [Hz] (its LSTM steps at this rate)."""
         return float(self.twin.fs_model)

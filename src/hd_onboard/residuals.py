@@ -70,13 +70,22 @@ class Residuals:
         self.expected = self.expected_configured
 
     def new_mission(self) -> None:
-        """The configured model again, reset; temperature and command unknown; no settle interval."""
+        """The configured model again, reset; temperature and command unknown; the mission start is a reset
+        too: not evaluated for :meth:`settle_s` (the twin's derivative window is not filled there, and a
+        mission that starts with a step in acceleration gave the twin's largest errors on its first samples)."""
         self.temperature = math.nan  # degC, last plausible temperature sample
         self.theta_ref = math.nan  # rad, last command
         self.expected = self.expected_configured
         self.expected.reset()
-        self.settle_until = -math.inf  # s since mission start: not evaluated before
+        self.settle_until = self.settle_s  # s since mission start: not evaluated before
         self._x1 = np.full(7, np.nan)
+
+    @property
+    def settle_s(self) -> float:
+        """Seconds not evaluated after a model reset: ``cfg.settle_s`` (filter / LSTM transient), at least the
+        running model's edge interval (``edge_s``: :attr:`hd_twin.runtime.StreamingTwin.edge_s`; 0 for the
+        physics-only stand-in)."""
+        return max(float(self.cfg.settle_s), float(getattr(self.expected, "edge_s", 0.0) or 0.0))
 
     def set_params(self, params: ph.TwinParams) -> None:
         """New twin parameters (the gear ratio is kept), given to both models."""
@@ -116,7 +125,7 @@ class Residuals:
                              f"twin refused: trained at {fm:.1f} Hz, joint states at {fs:.1f} Hz ({e}); "
                              "physics-only stand-in used", note)
         if t_s is not None:  # a reconfigured model restarts: not evaluated for settle_s
-            self.settle_until = max(self.settle_until, t_s + self.cfg.settle_s)
+            self.settle_until = max(self.settle_until, t_s + self.settle_s)
 
     def twist_reference_problem(self, fs: float | None, msg: str, note: Note) -> None:
         """Encoders without a common zero (:meth:`hd_onboard.guard.InputGuard.check_twist_reference`): a trained
@@ -164,7 +173,7 @@ class Residuals:
         twist_raw = V[:, 1] - V[:, 0] / self.params.N
         twist = twist_raw - Q_for_twist / self.params.K_out
         # not evaluated: settle_s after each reset (per sample: a reset late in the block masks only what follows it)
-        settle = np.maximum(settle_before, np.maximum.accumulate(np.where(reset_at, t + cfg.settle_s, -np.inf)))
+        settle = np.maximum(settle_before, np.maximum.accumulate(np.where(reset_at, t + self.settle_s, -np.inf)))
         evaluate = valid & (t >= settle)
         r_Q = np.where(evaluate, r_Q, np.nan)
         twist = np.where(evaluate, twist, np.nan)
@@ -190,4 +199,4 @@ class Residuals:
 
     def _reset_segment(self, t_s: float) -> None:
         self.expected.reset()
-        self.settle_until = t_s + self.cfg.settle_s
+        self.settle_until = t_s + self.settle_s

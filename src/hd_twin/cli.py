@@ -12,7 +12,8 @@ from pathlib import Path
 
 
 def _model_config(path: str | None) -> dict:
-    """A model config (JSON or YAML): declared_effects, extra_terms, params (dict or YAML path), model_version, parent."""
+    """A model config (JSON or YAML): declared_effects, extra_terms, params (dict or YAML path), model_version, parent,
+    speed_timing."""
     if not path:
         return {}
     import yaml
@@ -43,6 +44,13 @@ def _model_config(path: str | None) -> dict:
     for k in ("model_version", "parent"):
         if k in d:
             out[k] = d[k]
+    if d.get("speed_timing"):  # discovery's re-timing of the logged speeds (hd_twin.speedtiming)
+        from .speedtiming import SpeedTiming
+
+        try:
+            out["speed_timing"] = SpeedTiming.from_config(d["speed_timing"], f"{p} speed_timing").to_config()
+        except ValueError as e:
+            raise SystemExit(str(e)) from None
     return out
 
 
@@ -147,6 +155,8 @@ def _show(args) -> int:
     met = json.loads((d / "metrics.json").read_text()) if (d / "metrics.json").exists() else {}
     print(f"model {d}  version {cfg['model_version']}  arch {cfg['arch']}")
     print(f"declared effects: {cfg['declared_effects']}  extra terms: {len(cfg.get('extra_terms', []))}")
+    st = {k: v for k, v in (cfg.get("speed_timing") or {}).items() if k != "window_s"}
+    print("speed timing: " + (", ".join(f"{k} re-timed by {v['tau_s'] * 1e3:.3g} ms" for k, v in st.items()) or "as logged"))
     if met:
         v = met["validation"]
         print(f"validation NRMSE {v['nrmse_pct']:.3f} %  R^2 {v['r2']:.5f}  max err {v['max_err']:.4g} N*m")

@@ -257,6 +257,32 @@ def derivative(x: np.ndarray, dt: float, cutoff: float | None = None) -> np.ndar
     return np.gradient(x, dt, edge_order=2)
 
 
+def edge_half_window(dt: float, cutoff_hz: float | None = None) -> int:
+    """Samples at each end of a segment where the twin's derived signals are not defined: half the window of
+    the physics path's derivative filter (:func:`hd_twin.identify.sg_window` at the model rate, -3 dB at
+    ``cutoff_hz``, default :data:`hd_twin.identify.DERIV_CUTOFF_HZ`).
+
+    Why: a derivative at a sample needs the signal on both sides over the filter's window; within half a window
+    of a segment's start or end the Savitzky-Golay filter extrapolates its edge polynomial fit, which is wrong
+    when the motion has a kink there (a mission that starts with a step in acceleration: measured 4263 N*m
+    paper-preset maximum error on the first sample of the sweep missions, every other sample within 417 N*m).
+    These samples are *edge samples*: excluded from the losses and the error metrics (counted), not predicted
+    differently. The streaming twin's counterpart is its window fill after a reset
+    (:attr:`hd_twin.runtime.StreamingTwin.edge_s`)."""
+    from .identify import DERIV_CUTOFF_HZ, sg_window  # noqa: PLC0415
+
+    return int(sg_window(1.0 / dt, DERIV_CUTOFF_HZ if cutoff_hz is None else cutoff_hz) // 2)
+
+
+def edge_samples(n: int, dt: float, cutoff_hz: float | None = None) -> np.ndarray:
+    """Bool [n]: the first and last :func:`edge_half_window` samples of a segment of ``n`` samples."""
+    m = edge_half_window(dt, cutoff_hz)
+    e = np.zeros(n, bool)
+    e[:m] = True
+    e[max(n - m, 0):] = True
+    return e
+
+
 @dataclass
 class Segment:
     """One gap-free stretch of one mission at the model rate; arrays [n]."""
@@ -270,13 +296,14 @@ class Segment:
     X: np.ndarray  # [n, 7] raw inputs (filtered/decimated, NaN bridged)
     F: np.ndarray  # [n, 13] features (NaN where not computable)
     Q_red: np.ndarray  # [n] measured output torque (NaN where absent)
-    mask: np.ndarray  # [n] bool: all raw inputs and Q_red were finite before bridging
+    mask: np.ndarray  # [n] bool: all raw inputs and Q_red were finite before bridging, and not an edge sample
     theta_m_dd: np.ndarray  # [n] rad/s^2
     theta_f_dd: np.ndarray  # [n] rad/s^2
     phi: np.ndarray  # [n] rad, theta_f - theta_m/N (float64)
     phi_d: np.ndarray  # [n] rad/s
     temperature: np.ndarray  # [n] degC (NaN-bridged; T_ref where absent)
     Q_phys: np.ndarray | None = None  # [n] N*m, the identified physics path (hd_twin.physpath), set by training
+    edge: np.ndarray | None = None  # [n] bool: measured samples that are edge samples (:func:`edge_samples`), left out of ``mask``
 
     @property
     def n(self) -> int:
@@ -299,10 +326,13 @@ def decimation_for(fs: float, fs_model: float | None, where: str) -> int:
 
 
 def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_len: int = 16,
-               names: Sequence[str] | None = None) -> list[Segment]:
+               names: Sequence[str] | None = None, speed_timing=None) -> list[Segment]:
     """Split a Mission into gap-free, anti-aliased, decimated :class:`Segment` s at ``fs_model`` Hz.
 
-    ``names``: the feature columns of ``Segment.F`` (default :data:`FEATURES`).
+    ``names``: the feature columns of ``Segment.F`` (default :data:`FEATURES`). ``speed_timing``: the
+    model's ``config.json:speed_timing`` (dict or :class:`hd_twin.speedtiming.SpeedTiming`; None / empty:
+    speeds as logged): the listed logged speeds are re-timed per segment at the bag rate, before anything
+    else sees them (the streaming twin does the same causally).
 
     Segments shorter than ``min_len`` samples (after decimation) are dropped.
     Raises ValueError naming the bag when the mission is unusable.
@@ -324,6 +354,10 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
                          "finite" + (" (Q_red is NaN throughout: no output torque sensor, so the twin can be "
                                      "neither trained nor scored on this bag)" if not np.isfinite(Q_all).any() else ""))
     sos = antialias_sos(fs, dec)
+    from .speedtiming import SpeedTiming  # noqa: PLC0415
+
+    timing = speed_timing if isinstance(speed_timing, SpeedTiming) else SpeedTiming.from_config(speed_timing)
+    t_all = np.asarray(mission.t, dtype=np.float64)
     out: list[Segment] = []
     for a, b in segment_bounds(mission.segment):
         if b - a < max(3, min_len * dec):
@@ -331,6 +365,7 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
         X = bridge_nan(X_all[a:b])
         absent = ~np.isfinite(X).all(axis=0)  # inputs with no finite sample in this segment
         X[:, absent] = 0.0
+        X = timing.apply_X(X, t_all[a:b])  # X itself when the model has no re-timing
         Q = Q_all[a:b].copy()
         m = finite[a:b].copy()
         Qb = bridge_nan(Q)
@@ -345,6 +380,7 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
         else:
             Q = np.where(m, Q, np.nan)
         dt = dec / fs
+        edge = edge_samples(len(X), dt)
         phi = X[:, 3] - X[:, 0] / N
         F = features(X, N, dt)
         F[:, 9] = np.nan if absent[6] or absent[3] else F[:, 9]  # no command: feature -> training mean
@@ -363,12 +399,13 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
                 X=X,
                 F=F,
                 Q_red=Q,
-                mask=m & np.isfinite(Q),
+                mask=m & np.isfinite(Q) & ~edge,
                 theta_m_dd=derivative(X[:, 1], dt),
                 theta_f_dd=derivative(X[:, 4], dt),
                 phi=phi,
                 phi_d=derivative(phi, dt),
                 temperature=temp,
+                edge=edge & m & np.isfinite(Q),
             )
         )
     return out

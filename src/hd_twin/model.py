@@ -251,8 +251,10 @@ class PINN(nn.Module):
         self.calib_names = list(calibrate)
         self.calib_reg = float(calib_reg)
         self.calib = nn.Parameter(torch.zeros(len(self.calib_names)))
-        self.net, self.params, self.effects = net, params, list(effects)
         self.extra_terms = list(extra_terms)
+        # the declared effects physics evaluates itself (an effect carried by an identified term is not doubled)
+        self.declared_effects = list(effects)
+        self.net, self.params, self.effects = net, params, ph.equation_effects(effects, self.extra_terms)
         self.q_mean, self.q_std = float(q_mean), float(q_std)
         F_ref = q_std / params.r_m
         self.u_scale = params.mu_g * F_ref / params.k_b  # m

@@ -254,6 +254,22 @@ def sgn_eps(xp, w, eps: float):
     return xp.tanh(w / eps)
 
 
+#: Input-friction effects with an equation here whose parameters are defaults unless recalibrated; when an
+#: extra term carries one of them (discovery declares a found effect and writes its identified term under the
+#: effect's name), the term alone evaluates it (:func:`equation_effects`).
+TERM_CARRIED_EFFECTS = ("stribeck_friction", "temperature_dependent_friction", "load_dependent_friction")
+
+
+def equation_effects(effects, extra_terms=()) -> list[str]:
+    """The declared effects this module evaluates with its own equations, given the model's extra terms.
+
+    An effect in :data:`TERM_CARRIED_EFFECTS` that an extra term is named after is left to that term: its
+    equation here would add a second, default-parameter copy of the same effect (discovery writes both the
+    declared name, so the model records the effect, and the identified term). Every other effect is kept."""
+    carried = {t.get("name") for t in extra_terms if isinstance(t, dict)} & set(TERM_CARRIED_EFFECTS)
+    return [e for e in effects if e not in carried]
+
+
 def input_friction(xp, p: TwinParams, effects, omega_m, temperature=None, Q_red=None):
     """Input-side (motor-referred) friction torque of the declared effects [N*m].
 

@@ -67,6 +67,13 @@ class StreamingTwin:
         pp = self.config.get("physics_path")
         self.physpath = PhysicsPath.from_dict(pp)
         self.gate = float((pp or {}).get("gate", 1.0)) if self.physpath.active else 1.0
+        from .speedtiming import SpeedTiming  # noqa: PLC0415
+
+        self.speed_timing = SpeedTiming.from_config(self.config.get("speed_timing"),
+                                                    f"{self.model_dir}/config.json speed_timing")
+        cut = getattr(self.physpath.identified, "cutoff_hz", None) if self.physpath.active else None
+        # edge samples after a reset: the derivative filter's window is not yet filled (hd_twin.data.edge_half_window)
+        self._edge_n = 2 * D.edge_half_window(1.0 / self.fs_model, cut)
         self.reset(fs_in)
 
     @property
@@ -80,12 +87,15 @@ class StreamingTwin:
         self.fs_in = float(fs_in) if fs_in is not None else self.fs_model
         self.decimation = D.decimation_for(self.fs_in, self.fs_model, str(self.model_dir))
         self._sos = D.antialias_sos(self.fs_in, self.decimation)
+        # causal re-timing of the logged speeds at the input rate (None: speeds as logged)
+        self._retimer = self.speed_timing.streamer(self.fs_in) if self.speed_timing.active else None
         self._zi = None
         self._last = None
         self._prev = None
         self._phase = 0
         self._hist = np.zeros((0, len(D.RAW_INPUTS)))  # model-rate rows for the physics path
         self._n_model = 0  # model-rate samples since the reset
+        self._n_out = 0  # outputs since the reset (edge flags)
         self._keep = None  # physics-path history length (set at the first step)
         self.h = np.zeros((self.layers, 1, self.hidden), np.float32)
         self.c = np.zeros((self.layers, 1, self.hidden), np.float32)
@@ -114,7 +124,8 @@ class StreamingTwin:
         if X.ndim != 2 or X.shape[1] != len(self.inputs):
             raise ValueError(f"StreamingTwin.step: X must be (n, {len(self.inputs)}) with columns {self.inputs}, got {X.shape}")
         if len(X) == 0:
-            return {k: np.zeros(0) for k in OUTPUT_NAMES + ("Q_phys",)} | {"index": np.zeros(0, int)}
+            return {k: np.zeros(0) for k in OUTPUT_NAMES + ("Q_phys",)} | {"index": np.zeros(0, int),
+                                                                          "edge": np.zeros(0, bool)}
         if self._sos is not None:  # the filter must not see NaN: hold the last finite value per input
             X = X.copy()
             for j in range(X.shape[1]):
@@ -126,12 +137,14 @@ class StreamingTwin:
                     X[:, j] = np.where(ok_idx >= 0, X[np.maximum(ok_idx, 0), j], last)
                     X[~np.isfinite(X[:, j]), j] = 0.0 if j != 5 else float(self.params["T_ref"])
             self._last = X[-1].copy()
+        if self._retimer is not None:
+            X = self._retimer.step(X)
         Xf = self._filter(X)
         idx = np.arange((-self._phase) % self.decimation, len(X), self.decimation)
         self._phase = (self._phase + len(X)) % self.decimation
         Xd = Xf[idx]
         if len(Xd) == 0:
-            return {k: np.zeros(0) for k in OUTPUT_NAMES + ("Q_phys",)} | {"index": idx}
+            return {k: np.zeros(0) for k in OUTPUT_NAMES + ("Q_phys",)} | {"index": idx, "edge": np.zeros(0, bool)}
         F = D.features(Xd, self.N, self.decimation / self.fs_in, prev=self._prev, names=self.feature_names)
         self._prev = Xd[-1].copy()
         Z = self.norm.norm_features(F).astype(np.float32)[None]
@@ -141,7 +154,19 @@ class StreamingTwin:
         q_phys = self._phys(Xd) if self.physpath.active else np.zeros(len(Xd))
         if self.physpath.active:
             si[0] = q_phys + self.gate * si[0]
-        return {"Q_red": si[0], "Q_phys": q_phys, "x_FS": si[1] + self.params["r_b"] * Xd[:, 0], "y_FS": si[2], "index": idx}
+        edge = self._n_out + np.arange(len(Xd)) < self._edge_n
+        self._n_out += len(Xd)
+        return {"Q_red": si[0], "Q_phys": q_phys, "x_FS": si[1] + self.params["r_b"] * Xd[:, 0], "y_FS": si[2], "index": idx,
+                "edge": edge}
+
+    @property
+    def edge_s(self) -> float:
+        """Seconds after a reset whose outputs are edge samples (``step``'s ``edge``): the derivative filter's
+        window of the physics path (w model-rate samples, :func:`hd_twin.data.edge_half_window`) is not yet
+        filled, so its one-sided fit extrapolates over fewer samples; a mission that starts with a step in
+        acceleration gives errors there that no model can avoid. The batch counterpart marks the first and
+        last half-window of each segment (:func:`hd_twin.data.edge_samples`)."""
+        return self._edge_n / self.fs_model
 
     def _phys_keep(self, dt: float) -> int:
         """Model-rate rows the physics path keeps: two windows of identify's derivative filter (all the
@@ -179,7 +204,7 @@ class StreamingTwin:
         """Whole-mission inference, one reset per gap-free segment (as the node does after a gap)."""
         D.check_twist_reference(mission, float(mission.meta.gear_ratio), mission.report.path or "mission")
         X = D.mission_inputs(mission)
-        res = {k: [] for k in OUTPUT_NAMES + ("index",)}
+        res = {k: [] for k in OUTPUT_NAMES + ("index", "edge")}
         for a, b in D.segment_bounds(mission.segment):
             self.reset(mission.fs, mission.meta.gear_ratio)
             o = self.step(X[a:b])

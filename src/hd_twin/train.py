@@ -99,6 +99,8 @@ class TrainConfig:
     physics_path: str = "auto"
     gate_blocks: int = 2  # contiguous blocks per validation unit in which the remainder must help
     features: list[str] = field(default_factory=lambda: list(D.FEATURES))  # network inputs (names of hd_twin.data)
+    # re-timing of the logged speeds (hd_twin.speedtiming config entry, written by discovery); {} = as logged
+    speed_timing: dict = field(default_factory=dict)
 
     @classmethod
     def from_preset(cls, name: str, **overrides) -> "TrainConfig":
@@ -121,6 +123,9 @@ class TrainConfig:
         if not self.features:
             raise ValueError("training config: features must name at least one feature")
         D.feature_columns(self.features)
+        from .speedtiming import SpeedTiming  # noqa: PLC0415
+
+        SpeedTiming.from_config(self.speed_timing, "training config: speed_timing")
         if not isinstance(self.extra_terms, list) or not all(isinstance(t, dict) for t in self.extra_terms):
             raise ValueError("training config: extra_terms must be a list of term dicts")
         if self.physics_path not in ("auto", "identified", "none"):
@@ -318,10 +323,12 @@ def evaluate(pinn, segs: Sequence[D.Segment], norm: D.Normalizer, residuals: boo
     outs = predict_outputs(pinn, segs, norm, batch_samples) if outs is None else outs
     yt = np.concatenate([np.where(s.mask, s.Q_red, np.nan) for s in segs])
     met = q_metrics(yt, np.concatenate(q_from_outputs(pinn, segs, outs)))
+    # measured samples within half a derivative window of a segment edge (hd_twin.data.edge_samples): not scored
+    met["edge_excluded"] = int(sum(int(s.edge.sum()) for s in segs if s.edge is not None))
     met["gate"] = float(pinn.gate)
     if residuals:
         met.update(residual_rms(pinn, segs, norm, outs=outs))
-    prior = q_metrics(yt, physics_baseline(segs, pinn.params, pinn.effects))
+    prior = q_metrics(yt, physics_baseline(segs, pinn.params, pinn.declared_effects))
     if pinn.physpath.active:
         met["physics_only"] = q_metrics(yt, np.concatenate(segment_phys(pinn, segs)))
         met["physics_prior"] = prior
@@ -425,7 +432,8 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
     for k, i in enumerate(list(tr_idx) + list(va_idx)):
         if progress:
             print(f"{_CR}pre-processing {k + 1}/{len(tr_idx) + len(va_idx)}", end="" if _CR else "\n", file=sys.stderr, flush=True)
-        segs_by_m[i] = D.preprocess(missions[i], fs_model, T_ref=params.T_ref, names=cfg.features)
+        segs_by_m[i] = D.preprocess(missions[i], fs_model, T_ref=params.T_ref, names=cfg.features,
+                                    speed_timing=cfg.speed_timing)
     if progress:
         print(file=sys.stderr)
     t_pre = time.perf_counter() - t0
@@ -559,6 +567,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         "physics_path": path.to_dict() | {"gate": float(pinn.gate)},
         "declared_effects": list(cfg.declared_effects),
         "extra_terms": list(cfg.extra_terms),
+        **({"speed_timing": dict(cfg.speed_timing)} if cfg.speed_timing else {}),
         "params": params.to_dict(),
         "calibrated_params": pinn.calibrated_params().to_dict() if cfg.calibrate else None,
         "preprocessing": {"fs_model": fs_model, "antialias": "causal Butterworth order 4, 0.8 x new Nyquist (when decimating)",
@@ -614,7 +623,8 @@ def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
     for m in missions:
         where = mission_label(m)
         try:
-            s_m = D.preprocess(m, fs_model, T_ref=pinn.params.T_ref, names=names)
+            s_m = D.preprocess(m, fs_model, T_ref=pinn.params.T_ref, names=names,
+                               speed_timing=cfgd.get("speed_timing"))
         except ValueError as e:
             if len(missions) == 1:
                 raise

@@ -69,7 +69,8 @@ def test_preprocess_nan_gaps_and_decimation():
     s0 = segs[0]
     assert s0.n == 375 and np.isfinite(s0.X).all() and np.isfinite(s0.theta_m_dd).all()
     assert not s0.mask[500 // 4: 520 // 4].any() and not s0.mask[900 // 4] and s0.mask[50:100].all()
-    assert np.isnan(s0.Q_red[~s0.mask]).all()
+    assert np.isnan(s0.Q_red[~s0.mask & ~s0.edge]).all()  # out of the mask: not measured, or an edge sample
+    assert not (s0.mask & s0.edge).any() and s0.edge[0] and s0.edge[-1]
     with pytest.raises(ValueError, match="integer factor"):
         D.preprocess(m, fs_model=300.0)
     m.Q_red[:] = np.nan

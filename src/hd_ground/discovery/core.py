@@ -18,7 +18,10 @@ plots and the report). Steps, for one measured target signal:
    current error, does so in most folds and has identified coefficients (their
    leave-one-block-out jackknife Wald statistic reaches the 3-sigma chi^2
    quantile); a backward pass drops groups that became redundant or lost
-   identification. Alternatives of one family compete; one survives.
+   identification. Alternatives of one family compete; one survives. A shaped group that is not identified
+   in the final model closes its family and the selection is made again; the friction transition width is
+   identified again given the selected groups, and when it moves beyond its SD, candidates and selection are
+   redone with it (one second pass).
 5. The selected model is refitted on all fit data and scored on the held-out
    blocks/bags against the baseline.
 """
@@ -429,24 +432,26 @@ def _paired_t(sse_a: np.ndarray, sse_b: np.ndarray) -> float:
 
 
 def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Candidate, list[int]]], opt: Options,
-                  reshape=None, confirm=None):
+                  reshape=None, confirm=None, closed=()):
     """Forward group selection + backward pruning by leave-one-block-out CV. Returns (selected, trace).
 
     Candidates with nonlinear shapes: before each forward step ``reshape(gi, cur_idx)`` identifies the
     group's shape given the current model (CV profile search) and updates its columns; it returns
     False when no shape is admissible. A group is admitted only if ``confirm(gi, cur_idx)`` (the
-    shape's block-jackknife identification) returns (True, note).
+    shape's block-jackknife identification) returns (True, note). Families in ``closed`` are not
+    considered; a refinement (``Candidate.after``) competes only once its family is selected.
     """
     cur_idx = list(base_idx)
     cur = gram.cv_sse(cur_idx)
     selected: list[int] = []  # indices into groups
     trace = [{"step": "baseline", "cv_sse": float(cur.sum())}]
-    fams_used: set[str] = set()
+    fams_used: set[str] = set(closed)
     while len(selected) < opt.max_effects:
         best = None
         per_fam: dict[str, list[tuple[int, np.ndarray]]] = {}
+        fams_sel = {groups[g][0].family for g in selected}
         for gi, (cand, cols) in enumerate(groups):
-            if cand.family in fams_used:
+            if cand.family in fams_used or (getattr(cand, "after", None) and cand.after not in fams_sel):
                 continue
             if cand.shapes and reshape is not None and not reshape(gi, cur_idx):
                 continue
@@ -658,11 +663,58 @@ def split_fit_heldout(ds: Dataset, heldout_bags: list[int] | None, heldout_frac:
     return ho
 
 
+def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms, twin_params, keep, X_all,
+                      base_idx, groups, sel, eps0: float, rng: tuple[float, float]) -> tuple | None:
+    """The friction transition width identified again given the selected groups (CV profile + jackknife).
+
+    The width is one parameter of every term on the friction direction: the selected groups' tanh(omega_m /
+    eps0) columns follow it in the search.
+
+    The baseline's width is first identified before any effect is modelled: an undeclared effect several
+    times the noise floor is then in the residual and blurs the profile. Given the selected groups' columns
+    the width is searched again over the same range. Returns (eps, sd, note, eps0) when it is identified and
+    differs from ``eps0`` by more than its own SD, else None. Skipped when a selected group re-identifies
+    the width itself (it replaces the baseline's Coulomb column, e.g. Stribeck)."""
+    if any(getattr(groups[gi][0], "replace_idx", ()) for gi in sel):
+        return None
+    cols_sel = [c for gi in sel for c in groups[gi][1]]
+    s_rows = _take(sig, srows)
+    bc = baseline_columns(target, avail, declared, extra_terms, 1.0, twin_params)[0]
+    names = [bc[j].param for j in keep] + [f"g{j}" for j in cols_sel]
+
+    def with_eps(b, eps):
+        # the selected groups' friction direction tanh(omega_m / eps0) follows the width under search
+        if b.get("op") == "prod":
+            return {**b, "factors": [with_eps(f, eps) for f in b["factors"]]}
+        if b.get("op") == "sgn" and b.get("var") == "omega_m" and b.get("eps") == eps0:
+            return {**b, "eps": float(eps)}
+        return b
+
+    def design(sh):
+        Xb = _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, sh["eps"], twin_params)[0],
+                              s_rows)[:, keep]
+        Xg = [basis_matrix([with_eps(b, sh["eps"]) for b in groups[gi][0].basis], s_rows) for gi in sel]
+        return np.column_stack([Xb] + Xg)
+    f = fit_separable(y[srows], design, names, block[srows], [Shape("eps", rng[0], rng[1], log=True, n_grid=12)])
+    e1, sd1 = float(f.shape["eps"]), float(f.shape_sd["eps"])
+    if not f.identified["eps"] or abs(e1 - eps0) <= sd1:
+        return None
+    note = (f"friction transition width identified again given the selected effects: eps {eps0:.3g} -> {e1:.3g} +- "
+            f"{sd1:.2g} rad/s (CV profile over the same range, block jackknife; the first estimate had the "
+            "undeclared effects in its residual); candidates and selection redone with it")
+    return e1, sd1, note, float(eps0)
+
+
 def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: list[str] | None = None,
                     extra_terms: list[dict] | None = None, twin_params: dict | None = None,
-                    opt: Options | None = None) -> SignalResult:
-    """Run discovery for one target signal; see the module docstring."""
+                    opt: Options | None = None, transition_width: tuple | None = None) -> SignalResult:
+    """Run discovery for one target signal; see the module docstring.
+
+    ``transition_width``: (eps, sd, note, first eps) of a friction transition width already identified given
+    the selected effects (internal: set by the second pass, see :func:`_reidentify_width`); ``error_before``
+    stays the baseline's at its first width."""
     opt = opt or Options()
+    ds0, heldout0 = ds, heldout
     declared = list(DEFAULT_DECLARED.get(target, []) if declared is None else declared)
     extra_terms = list(extra_terms or [])
     twin_params = dict(twin_params or {})
@@ -724,6 +776,12 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         eps_fit = fit_separable(y[srows], design_eps, [c.param for c in bc], ds.block[srows],
                                 [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)])
         sgn_eps = eps_fit.shape["eps"]
+        if transition_width is not None:
+            sgn_eps = float(transition_width[0])
+            eps_fit.shape_sd["eps"] = float(transition_width[1])
+            eps_fit.identified["eps"] = True
+            eps_fit.notes = []
+            statements.append(transition_width[2])
         statements.append(
             f"friction transition through zero speed: tanh(omega_m / eps), eps = {sgn_eps:.3g} +- "
             f"{eps_fit.shape_sd['eps']:.2g} rad/s (cross-validated profile search over {lo_eps:.3g}..{hi_eps:.3g} "
@@ -772,6 +830,13 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     cols = [cols[j] for j in keep]
     Xb_all = Xb_all[:, keep]
     beta_b = _lstsq(Xb_all[fit], y[fit])
+    # the error "before" is the baseline's as identified on its own: in a second pass (width identified again
+    # given the effects) the baseline at its first width, so the width's second look is credited to "after"
+    Xb_before, beta_before = Xb_all, beta_b
+    if transition_width is not None and len(transition_width) > 3:
+        Xb_before = _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, float(transition_width[3]),
+                                                      twin_params)[0], sig)[:, keep]
+        beta_before = _lstsq(Xb_before[fit], y[fit])
     r_base = y - Xb_all @ beta_b
     base_params = {c.param: float(b) for c, b in zip(cols, beta_b)}
     if eps_fit is not None:
@@ -822,7 +887,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     j0 = Xb_all.shape[1]
     for c in cands:
         M = basis_matrix(c.basis, sig)
-        if not np.all(np.isfinite(M)) or np.any(np.std(M[fit], 0) < 1e-12 * (1 + np.abs(M[fit]).max())) and \
+        if not np.all(np.isfinite(M)) or np.any(np.std(M[fit], 0) <= 1e-12 * np.abs(M[fit]).max(0)) and \
                 not any(b["op"] == "const" for b in c.basis):
             continue
         idx = list(range(j0, j0 + M.shape[1]))
@@ -878,21 +943,40 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         confirmed[gi] = (key, (ok_, "; ".join(n for n in res.notes if n.split(":")[0] not in cand.nuisance)))
         return confirmed[gi][1]
 
-    sel, trace = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm)
-
     # 4. final shapes of the selected shaped groups, each given all the others (CV profile + jackknife);
-    # a group whose shape is no longer identified in the final model leaves it
-    for gi in list(sel):
-        cand, cix = groups[gi]
-        if not cand.shapes:
-            continue
-        others = _model(base_idx, groups, [gj for gj in sel if gj != gi])
-        ok_, note = confirm(gi, others)
-        if not ok_:
-            sel.remove(gi)
-            trace.append({"step": "drop (shape unidentified)", "candidate": f"{cand.name}[{cand.family}]",
-                          "note": note})
-            statements.append(f"{cand.name}: its shape is not identified in the final model ({note}); left out")
+    # a group whose shape is no longer identified in the final model leaves it, and the selection is made
+    # again without its family: a group that is not identified must not have steered which others entered
+    closed: set[str] = set()
+    trace = []
+    for _pass in range(3):
+        sel, tr = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm, closed=closed)
+        trace += tr
+        dropped = []
+        for gi in list(sel):
+            cand, cix = groups[gi]
+            if not cand.shapes:
+                continue
+            others = _model(base_idx, groups, [gj for gj in sel if gj != gi])
+            ok_, note = confirm(gi, others)
+            if not ok_:
+                sel.remove(gi)
+                dropped.append(cand.family)
+                trace.append({"step": "drop (shape unidentified)", "candidate": f"{cand.name}[{cand.family}]",
+                              "note": note})
+                statements.append(f"{cand.name}: its shape is not identified in the final model ({note}); left out")
+        if not dropped or _pass == 2:
+            break
+        closed |= set(dropped)
+        trace.append({"step": "reselect", "closed": sorted(closed)})
+        statements.append(f"selection made again without {sorted(closed)} (not identified in the final model)")
+    if transition_width is None and eps_fit is not None and not isinstance(fric, dict) and sel:
+        rew = _reidentify_width(y, sig, srows, ds.block, target, avail, declared, extra_terms, twin_params, keep,
+                                X_all, base_idx, groups, sel, sgn_eps, (lo_eps, hi_eps))
+        if rew is not None:
+            # the width was first identified with the undeclared effects still in the residual; given the
+            # selected groups it is identified again, and candidates built on it are selected again
+            return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
+                                   twin_params=twin_params, opt=opt, transition_width=rew)
     # the final shapes' uncertainty by variable projection on the cross-validated residuals (sandwich), and
     # whether a least-squares refinement of the same CV objective runs into a degenerate optimum (reported)
     for gi in sel:
@@ -935,7 +1019,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             sig_eval = sig.replaced(theta_m=sig["theta_m"] + shift)
         X_eval = X_all if sig_eval is sig else np.concatenate(
             [Xb_all] + [basis_matrix(c.basis, sig_eval) for c, _ in groups], 1) if groups else Xb_all
-        r_before = y - Xb_all @ beta_b
+        r_before = y - Xb_before @ beta_before
         r_after = y - X_eval[:, idx] @ beta
         eb = _err(r_before[score], y[score])
         ea = _err(r_after[score], y[score]) if terms else dict(eb)

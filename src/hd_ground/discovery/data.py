@@ -17,6 +17,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hd_bag.mission import Mission
+# the re-timing equation and its derivative live in the twin (one place: the twin applies the same re-timing)
+from hd_twin.speedtiming import retime_speed  # noqa: F401  (re-exported)
+from hd_twin.speedtiming import sg2_derivative as _derivative
 
 
 class DiscoveryError(ValueError):
@@ -45,25 +48,6 @@ class Dataset:
         return Dataset({k: v[mask] for k, v in self.signals.items()}, self.bag[mask], self.block[mask],
                        self.tfrac[mask], self.t[mask], self.segment[mask], self.bag_names, self.gear_ratio,
                        self.torque_constant, list(self.notes), dict(self.speed_lags))
-
-
-def _derivative(x: np.ndarray, t: np.ndarray, seg: np.ndarray, window_s: float) -> np.ndarray:
-    """Smoothed time derivative per segment (Savitzky-Golay, quadratic), unit of x per second."""
-    from scipy.signal import savgol_filter
-
-    out = np.full(len(x), np.nan)
-    for s in np.unique(seg):
-        idx = np.flatnonzero(seg == s)
-        if len(idx) < 3:
-            continue
-        xs, ts = x[idx], t[idx]
-        dt = float(np.median(np.diff(ts)))
-        w = int(round(window_s / dt)) | 1
-        if w >= 5 and len(idx) > w and np.all(np.isfinite(xs)):
-            out[idx] = savgol_filter(xs, w, 2, deriv=1, delta=dt)
-        else:
-            out[idx] = np.gradient(xs, ts)
-    return out
 
 
 def _lag_sums(omega: np.ndarray, theta: np.ndarray, t: np.ndarray, seg: np.ndarray,
@@ -115,14 +99,6 @@ def speed_lag(missions: list[Mission], speed: str, angle: str, *,
     tau = -sar / saa
     rss = max(srr - sar * sar / saa, 0.0)
     return float(tau), float(np.sqrt(rss / (n - 1) / saa))
-
-
-def retime_speed(omega: np.ndarray, t: np.ndarray, seg: np.ndarray, tau: float, window_s: float) -> np.ndarray:
-    """The logged speed on its angle's time base: omega + tau omega' (the first-order inverse, exact for a
-    first-order low-pass at low frequency; omega' the smoothed derivative); samples without a derivative
-    are kept as logged."""
-    d = _derivative(omega, t, seg, window_s)
-    return np.where(np.isfinite(d), omega + tau * d, omega)
 
 
 def speed_timing(missions: list[Mission], window_s: float = 0.02) -> tuple[dict[str, float], list[str]]:

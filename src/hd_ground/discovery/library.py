@@ -59,6 +59,7 @@ class Candidate:
     test_cols: tuple[int, ...] | None = None  # columns whose identification decides (None: all)
     nuisance: tuple[str, ...] = ()  # shapes re-identified with the group whose identification does not decide
     replaces: tuple[str, ...] = ()  # baseline parameters whose columns the group replaces (e.g. "T_C")
+    after: str | None = None  # a refinement: competes only once this family is selected (e.g. the next order)
 
     def set_shape(self, shape: dict, sd: dict | None = None) -> None:
         """Fix the shape parameters (and record their SDs): rebuilds ``basis``."""
@@ -304,6 +305,24 @@ def transmission_candidates(ctx: LibraryContext) -> list[Candidate]:
                   lambda c: {"k3": float(c[0])}, requires=("windup",)),
         Candidate("unknown", "bias", None, None, [{"op": "const"}], "c_0", lambda c: {"c_0": float(c[0])}),
     ]
+
+
+@register_candidate_builder
+def torsion_order_candidates(ctx: LibraryContext) -> list[Candidate]:
+    """The torsion law's next odd order, k5 w^5, as a refinement of a selected cubic k3 w^3.
+
+    A measured twist-to-torque law is a smooth odd function whose polynomial degree is not known in
+    advance (a hardening mesh spring in series with linear compliances, PHYSICS.md 1.2, is not a pure
+    cubic in the measured twist); the degree is chosen like any group: the w^5 term competes only after the
+    cubic is selected and enters only if it lowers the fit blocks' CV error by ``min_gain`` and its
+    coefficient is identified (jackknife Wald). Named ``nonlinear_stiffness``: it is the same law.
+    """
+    if ctx.target != "Q_red" or "windup" not in ctx.available:
+        return []
+    return [Candidate("nonlinear_stiffness", "stiffness:5", "windup", None,
+                      [{"op": "pow", "var": "windup", "p": 5.0}],
+                      "k5 w^5 (next odd order of the torsion law after k3 w^3), w = theta_m/N - theta_f",
+                      lambda c: {"k5": float(c[0])}, requires=("windup",), after="stiffness")]
 
 
 @register_candidate_builder

@@ -161,7 +161,8 @@ def run_discovery(
                               "effects": [_effect_brief(e) for e in r2.effects], "heldout_frac": heldout_frac}
 
     report = build_report(results, split, ds, within, twin_dir, opt)
-    new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log)
+    new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log,
+                                 speed_lags=ds.speed_lags)
     report["twin_out"] = str(new_dir) if new_dir else None
     if plots and results:
         from .plots import plot_result
@@ -227,8 +228,14 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
 
 
 def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
-                       retrain: bool, missions, log) -> Path | None:
-    """Write the augmented model version (only when something was found)."""
+                       retrain: bool, missions, log, speed_lags: dict | None = None) -> Path | None:
+    """Write the augmented model version (only when something was found).
+
+    ``speed_lags`` (``Dataset.speed_lags``: the re-timing discovery used, empty when the speeds were used as
+    logged) go into ``config.json:speed_timing`` (:mod:`hd_twin.speedtiming`), so the twin evaluates the
+    found terms on the speeds they were fitted on; absent = as logged. A trained network copied from the
+    parent keeps the parent's entry (the inputs it was trained on) until it is retrained with the new one;
+    ``discovery.speed_timing`` always records discovery's."""
     # the twin evaluates static terms sample by sample: a term on a pre-sliding state (a path history) goes
     # in its static form (hd_ground.discovery.core.static_term); one without such a form stays in the report
     new_terms, dropped = [], []
@@ -275,7 +282,15 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
                 # the identified friction transition width (hd_twin.physics' regularised sign)
                 params["eps_omega"] = r.baseline_params["eps_omega"]
     cfg["params"] = params
-    cfg["discovery"] = {"recalibrated": [k for k in ("T_C", "b_visc", "eps_omega") if k in params],
+    timing = _speed_timing_entry(speed_lags or {}, missions)
+    parent_timing = cfg.pop("speed_timing", None)
+    if twin is not None and "normalization" in cfg and parent_timing:
+        # a copied network keeps the inputs it was trained on until it is retrained (below)
+        cfg["speed_timing"] = parent_timing
+    if timing and not (twin is not None and "normalization" in cfg):
+        cfg["speed_timing"] = timing  # physics-only version: the terms are evaluated on the speeds they were fitted on
+    cfg["discovery"] = {"speed_timing": timing or "speeds used as logged",
+                        "recalibrated": [k for k in ("T_C", "b_visc", "eps_omega") if k in params],
                         "baseline_refit": {r.signal: r.refit_baseline_params for r in results},
                         "network": "copied from the parent version, not retrained" if twin is not None else "none (physics-only model)"}
     if retrain and twin is not None and "train" in cfg:
@@ -284,7 +299,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
 
             tc = dict(cfg["train"])
             tc.update(declared_effects=decl, extra_terms=cfg["extra_terms"], model_version=cfg["model_version"],
-                      parent=str(twin_dir))
+                      parent=str(twin_dir), speed_timing=dict(timing))
             fields = TrainConfig.__dataclass_fields__
             log("retraining the twin with the new effects (hd_twin.train.train_twin) ...")
             train_twin(missions, dst, TrainConfig(**{k: v for k, v in tc.items() if k in fields}))
@@ -299,3 +314,16 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
     (dst / "config.json").write_text(json.dumps(json_safe(cfg), indent=2))
     log(f"new twin version {cfg['model_version']} written to {dst}")
     return dst
+
+
+def _speed_timing_entry(speed_lags: dict, missions) -> dict:
+    """``config.json:speed_timing`` for the re-timing discovery applied (with each delay's standard error)."""
+    if not speed_lags:
+        return {}
+    from hd_twin.speedtiming import SpeedTiming
+
+    from .data import speed_lag
+
+    angle = {"omega_m": "theta_m", "omega_f": "theta_f"}
+    se = {k: speed_lag(missions, k, angle[k])[1] for k in speed_lags} if missions else {}
+    return SpeedTiming.from_lags(speed_lags, se).to_config()
