@@ -982,9 +982,9 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     for gi in sel:
         cand, cix = groups[gi]
         if cand.shapes:
-            statements += shape_uncertainty(cand, lambda sh, gi=gi: _shape_design(gi, _model(
-                base_idx, groups, [gj for gj in sel if gj != gi]))(sh), y[srows], ds.block[srows],
-                sf["omega_m"] if "omega_m" in sf else None, sf.get("alpha_m"))
+            design = _shape_design(gi, _model(base_idx, groups, [gj for gj in sel if gj != gi]))
+            statements += shape_uncertainty(cand, design, y[srows], ds.block[srows],
+                                            sf["omega_m"] if "omega_m" in sf else None, sf.get("alpha_m"))
     while True:
         idx = _model(base_idx, groups, sel)
         beta_full = np.zeros(X_all.shape[1])  # coefficients of every column, 0 for those not in the model
