@@ -275,6 +275,8 @@ FAMILY_EFFECTS = {
     "motor_thermal_drift": ({}, ("tau_m", "temperature_dependent_friction", "temperature", None)),
 }
 DEFAULT_FAMILY_EFFECTS = ("position_periodic_torque", "stribeck_friction", "kinematic_error_harmonic")
+#: discover's (and greedy's) acceleration derivative window: "default" (20 ms) or "identify" (--alpha-window)
+ALPHA_WINDOW = "default"
 
 #: plant2 effect -> expected findings (signal, name, variable, order); None order: any
 PLANT2_EXPECT = {
@@ -305,7 +307,7 @@ def _match(k, want) -> bool:
 def _greedy(bags: list[str], signal: str) -> dict:
     """The plain greedy least-squares reference on the same bags, the last one held out."""
     from hd_bag import read_mission
-    from hd_ground.discovery.core import Options, choose_speed_timing, standstill_rows
+    from hd_ground.discovery.core import Options, choose_alpha_window, choose_speed_timing, standstill_rows
     from hd_ground.discovery.data import dataset_from_missions
     from hd_ground.discovery.greedy import greedy_discover
 
@@ -314,6 +316,9 @@ def _greedy(bags: list[str], signal: str) -> dict:
     ho = ds.bag == len(bags) - 1
     if ds.speed_lags:  # the same signals discover reads (its speed-timing choice, made on the fit bags)
         ds = choose_speed_timing(dataset_from_missions(ms, [str(b) for b in bags], retime_speeds=False), ds, ho)[0]
+    if ALPHA_WINDOW == "identify":  # ... and the same acceleration (its derivative-window choice, on the fit bags)
+        ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
+            ms, [str(b) for b in bags], retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho)[0]
     still = standstill_rows(ds, Options().standstill_sigmas)[0] if signal == "tau_m" else None
     return greedy_discover(ds, signal, ho, standstill=still)
 
@@ -414,7 +419,10 @@ def evaluate_world_case(world: str, effect: str | None, bags: list[str], expect:
     sig = expect[0][0] if expect else "tau_m"
     t0 = time.perf_counter()
     res: list = []
+    from hd_ground.discovery.core import Options
+
     rep = run_discovery(bags, out, heldout=[bags[-1]], plots=False, within_bag_check=False, signals=signals,
+                        opt=Options(alpha_window=ALPHA_WINDOW),
                         log=lambda s: None, results_out=res)
     t_d = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -546,7 +554,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cases", default=",".join(c.id for c in CASES))
     ap.add_argument("--seed", type=int, default=100)
     ap.add_argument("--plots", action="store_true", help="write discovery's PNGs per case")
+    ap.add_argument("--alpha-window", choices=("default", "identify"), default="default",
+                    help="worlds: the motor acceleration's derivative window for discover and greedy alike")
     a = ap.parse_args(argv)
+    global ALPHA_WINDOW
+    ALPHA_WINDOW = a.alpha_window
     if a.suite == "worlds":
         a.duration = a.duration or 4.0
         if a.out == "runs/discover_sim":

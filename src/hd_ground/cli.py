@@ -36,6 +36,9 @@ def register(subparsers) -> None:
     p.add_argument("--min-gain", type=float, default=0.02,
                    help="minimum relative drop of the cross-validated error for adding an effect")
     p.add_argument("--max-effects", type=int, default=6)
+    p.add_argument("--alpha-window", choices=["default", "identify"], default="default",
+                   help="motor acceleration's derivative window: the default 20 ms, or identified on the fit bags "
+                        "(5-33 samples, kept when it lowers the tau_m baseline's CV error by --min-gain)")
     p.add_argument("--wald-sigmas", type=float, default=3.0,
                    help="an effect's coefficients must lie this many leave-one-block-out standard errors from zero "
                         "(identified) to be added")
@@ -61,7 +64,7 @@ def _discover(args: argparse.Namespace) -> int:
         print("hdphm discover: --blocks must be >= 2 and --max-effects >= 0", file=sys.stderr)
         return 2
     opt = Options(min_gain=args.min_gain, max_effects=args.max_effects, wald_sigmas=args.wald_sigmas,
-                  angle_offset=args.angle_offset, calib_frac=args.calib_frac)
+                  angle_offset=args.angle_offset, calib_frac=args.calib_frac, alpha_window=args.alpha_window)
     try:
         heldout = args.heldout
         if args.fit_files:

@@ -26,6 +26,8 @@ Public API (used by ``hd_twin`` and ``hd_ground.discovery``; never imports
   ``block`` and the derivatives ``alpha_m`` / ``alpha_f``.
 * :class:`Shape` -- a nonlinear parameter to search: name, bounds, log scale.
 * :func:`fit_separable` -- the generic variable-projection fit -> :class:`SeparableFit`.
+* :func:`vp_shape` -- least-squares refinement of a shape on the cross-validated residuals, with its
+  block-robust sandwich uncertainty and a weak-identification flag -> :class:`ShapeVP`.
 * :func:`presliding_state` -- the rate-independent (Dahl / LuGre bristle) friction or hysteresis state.
 * :func:`identify_torque_balance` -- the motor-side torque balance -> :class:`Identified`.
 """
@@ -451,6 +453,132 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
 
 def _cell(s: Shape) -> float:
     return (s.to_u(s.hi) - s.to_u(s.lo)) / max(s.n_grid - 1, 1)
+
+
+# ---------------------------------------------------------------------------
+# variable projection on the cross-validated residuals: refinement and sandwich uncertainty
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class ShapeVP:
+    """Result of :func:`vp_shape` (shape values in their own units; ``log_se`` in e-folds for log shapes)."""
+
+    shape: dict[str, float]  # the least-squares optimum of the CV residuals (from ``start``)
+    se: dict[str, float]  # sandwich standard error (value units; log shapes: value x log_se)
+    log_se: dict[str, float]  # standard error in the search coordinate (log for log shapes)
+    corr: np.ndarray  # correlation matrix of the shape parameters (search coordinates)
+    weak: list[str]  # shapes whose standard error exceeds their size (or whose curvature vanishes)
+    cv_rmse: float  # leave-one-block-out RMSE at ``shape``
+    cv_rmse_start: float  # ... at ``start``
+    notes: list[str] = field(default_factory=list)
+
+
+def cv_residuals(y: np.ndarray, X: np.ndarray, block: np.ndarray) -> np.ndarray:
+    """Leave-one-block-out residuals: each row predicted by the least-squares fit on the other blocks."""
+    y = np.asarray(y, float)
+    block = np.asarray(block)
+    scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
+    Xs = X / scale
+    blocks, inv = np.unique(block, return_inverse=True)
+    G = np.zeros((len(blocks), X.shape[1], X.shape[1]))
+    g = np.zeros((len(blocks), X.shape[1]))
+    np.add.at(G, inv, Xs[:, :, None] * Xs[:, None, :])
+    np.add.at(g, inv, Xs * y[:, None])
+    Gt, gt = G.sum(0), g.sum(0)
+    p = X.shape[1]
+    lam = 1e-10 * np.trace(Gt) / max(p, 1)
+    B = np.linalg.solve(Gt[None] - G + lam * np.eye(p)[None], (gt[None] - g)[..., None])[..., 0]
+    return y - np.einsum("ij,ij->i", Xs, B[inv])
+
+
+def vp_shape(y: np.ndarray, design: Callable[[dict], np.ndarray], block: np.ndarray, shapes: Sequence[Shape],
+             start: Mapping[str, float], *, refine: bool = True, max_nfev: int = 60) -> ShapeVP:
+    """Variable projection on the cross-validated residual vector, with a block-robust sandwich covariance.
+
+    The coefficients are projected out (least squares on the other blocks for every row: the stacked
+    leave-one-block-out residual vector r(u), u the shapes in their search coordinates, log for log
+    shapes); ``scipy.optimize.least_squares`` minimises ||r(u)||^2 from ``start`` within the shapes'
+    bounds (``refine``), and the uncertainty of u is the sandwich A^-1 B A^-1 of that M-estimator, with
+    A = J^T J (J the Jacobian of r, central differences) and B = nb/(nb-1) sum_b (J_b^T r_b)(J_b^T r_b)^T over
+    the blocks (robust to residuals correlated within a block and to blocks that differ). A shape whose
+    standard error exceeds its own size (log shapes: more than one e-fold; linear shapes: more than
+    |value|), along which the CV residuals do not change at all, or whose refined optimum lies on a bound
+    of its searched range (within 2 %, the profile search's rule: a degenerate optimum the data only bound),
+    is reported ``weak``: weakly identified by these data, whatever value the search returned. Unlike the block jackknife of the profile search,
+    whose refits start from the full-data optimum, this sees flat directions of the CV surface.
+    """
+    from scipy.optimize import least_squares
+
+    shapes = list(shapes)
+    names = [s.name for s in shapes]
+    y = np.asarray(y, float)
+    block = np.asarray(block)
+    lo = np.array([s.to_u(s.lo) for s in shapes], float)
+    hi = np.array([s.to_u(s.hi) for s in shapes], float)
+    u0 = np.clip(np.array([s.to_u(start[n]) for s, n in zip(shapes, names)], float), lo, hi)
+
+    def shape_of(u):
+        return {s.name: s.from_u(ui) for s, ui in zip(shapes, u)}
+
+    def res(u):
+        return cv_residuals(y, design(shape_of(u)), block)
+
+    n = len(y)
+    r0 = res(u0)
+    cv0 = float(np.sqrt(np.mean(r0**2)))
+    notes: list[str] = []
+    u, r = u0, r0
+    if refine and shapes:
+        inside = (lo + 1e-9 < u0) & (u0 < hi - 1e-9)
+        lo_, hi_ = np.where(inside, lo, u0 - 1e-9), np.where(inside, hi, u0 + 1e-9)  # a bound optimum stays
+        sol = least_squares(res, u0, bounds=(lo_, hi_), diff_step=1e-3, max_nfev=max_nfev, x_scale=1.0)
+        if float(np.sum(sol.fun**2)) < float(np.sum(r0**2)):
+            u, r = np.asarray(sol.x, float), sol.fun
+    # Jacobian of the CV residual vector at u (central differences in the search coordinates)
+    h = 1e-3 * np.maximum(1.0, np.abs(u))
+    J = np.empty((n, len(shapes)))
+    for i in range(len(shapes)):
+        up, um = u.copy(), u.copy()
+        up[i] += h[i]
+        um[i] -= h[i]
+        J[:, i] = (res(up) - res(um)) / (2 * h[i])
+    blocks, inv = np.unique(block, return_inverse=True)
+    nb = len(blocks)
+    S = np.zeros((nb, len(shapes)))
+    np.add.at(S, inv, J * r[:, None])  # per-block score J_b^T r_b
+    A = J.T @ J
+    Bm = nb / max(nb - 1, 1) * (S.T @ S)
+    weak: list[str] = []
+    a_diag = np.diag(A)
+    if np.any(a_diag <= 0):
+        for i in np.flatnonzero(a_diag <= 0):
+            weak.append(names[i])
+            notes.append(f"{names[i]}: the cross-validated residuals do not depend on it; not identified")
+    Ai = np.linalg.pinv(A, rcond=1e-12)
+    C = Ai @ Bm @ Ai
+    sd_u = np.sqrt(np.maximum(np.diag(C), 0.0))
+    dd = np.where(sd_u > 0, sd_u, 1.0)
+    corr = C / np.outer(dd, dd)
+    shape = shape_of(u)
+    se, log_se = {}, {}
+    for i, s in enumerate(shapes):
+        pos = (u[i] - lo[i]) / max(hi[i] - lo[i], 1e-300)
+        if refine and (pos < 0.02 or pos > 0.98) and s.name not in weak:
+            # the same rule as the profile search: an optimum on a bound is only bounded by the data
+            weak.append(s.name)
+            notes.append(f"{s.name}: the least-squares optimum of the cross-validated residuals is at the "
+                         f"{'lower' if pos < 0.02 else 'upper'} bound {shape[s.name]:.3g} of the searched range "
+                         "(a degenerate optimum): weakly identified")
+        log_se[s.name] = float(sd_u[i])
+        se[s.name] = float(sd_u[i] * shape[s.name]) if s.log else float(sd_u[i])
+        too_wide = sd_u[i] > 1.0 if s.log else sd_u[i] > abs(shape[s.name])
+        if too_wide and s.name not in weak:
+            weak.append(s.name)
+            notes.append(f"{s.name} = {shape[s.name]:.3g}: sandwich standard error "
+                         + (f"{sd_u[i]:.2g} e-folds" if s.log else f"{sd_u[i]:.2g}")
+                         + " (variable projection on the cross-validated residuals): weakly identified")
+    return ShapeVP(shape, se, log_se, corr, weak, float(np.sqrt(np.mean(r**2))), cv0, notes)
 
 
 # ---------------------------------------------------------------------------

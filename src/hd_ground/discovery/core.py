@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hd_twin.identify import Shape, fit_separable, presliding_state
+from hd_twin.identify import Shape, fit_separable, presliding_state, vp_shape
 from hd_twin.terms import basis_matrix, evaluate_terms
 
 from .data import Dataset, DiscoveryError
@@ -135,6 +135,9 @@ class Options:
     min_samples: int = 1000
     standstill_sigmas: float = 3.0  # tau_m: rows with |omega_m| below this many speed-noise sigmas are left out
     min_fit_blocks: int = 3
+    # "identify": the motor acceleration's derivative window chosen on the fit bags (choose_alpha_window);
+    # "default": the 20 ms window (kept as default: see the README on smooth-cubic Stribeck)
+    alpha_window: str = "default"
 
 
 @dataclass
@@ -188,6 +191,10 @@ def baseline_columns(target: str, avail: set[str], declared: list[str], extra_te
     cols: list[BaselineColumn] = []
     if target == "tau_m":
         cols.append(BaselineColumn("J_eq", None, {"op": "var", "var": "alpha_m"}))
+        if "alpha_m_dot" in avail:
+            # the inertia torque's timing against the logged torque (choose_alpha_window): J alpha_m(t + tau_a)
+            # = J alpha_m + J tau_a alpha_m' to first order; tau_a = J_tau_a / J_eq
+            cols.append(BaselineColumn("J_tau_a", None, {"op": "var", "var": "alpha_m_dot"}))
         if "Q_red_over_N" in avail:
             cols.append(BaselineColumn("inv_eta", None, {"op": "var", "var": "Q_red_over_N"}))
         else:
@@ -894,13 +901,15 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     s_rows = _take(sig, srows)
     y_ref = float(np.sqrt(np.mean(y[srows] ** 2)))
 
+    def _shape_design(gi, cur_idx):
+        cand, cix = groups[gi]
+        Xc = X_all[srows][:, [c for c in cur_idx if c not in cand.replace_idx]]
+        return lambda sh: np.column_stack([Xc, basis_matrix(cand.make_basis(sh), s_rows)])
+
     def _shape_fit(gi, cur_idx, jackknife):
         cand, cix = groups[gi]
         keep_c = [c for c in cur_idx if c not in cand.replace_idx]
-        Xc = X_all[srows][:, keep_c]
-
-        def design(sh):
-            return np.column_stack([Xc, basis_matrix(cand.make_basis(sh), s_rows)])
+        design = _shape_design(gi, cur_idx)
         names = [f"c{j}" for j in keep_c] + [f"g{j}" for j in cix]
         return fit_separable(y[srows], design, names, ds.block[srows], cand.shapes, jackknife=jackknife,
                              positive=[len(keep_c) + len(cix) - 1] if cand.positive else [])
@@ -968,6 +977,14 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             # selected groups it is identified again, and candidates built on it are selected again
             return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
                                    twin_params=twin_params, opt=opt, transition_width=rew)
+    # the final shapes' uncertainty by variable projection on the cross-validated residuals (sandwich), and
+    # whether a least-squares refinement of the same CV objective runs into a degenerate optimum (reported)
+    for gi in sel:
+        cand, cix = groups[gi]
+        if cand.shapes:
+            design = _shape_design(gi, _model(base_idx, groups, [gj for gj in sel if gj != gi]))
+            statements += shape_uncertainty(cand, design, y[srows], ds.block[srows],
+                                            sf["omega_m"] if "omega_m" in sf else None, sf.get("alpha_m"))
     while True:
         idx = _model(base_idx, groups, sel)
         beta_full = np.zeros(X_all.shape[1])  # coefficients of every column, 0 for those not in the model
@@ -1087,6 +1104,54 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
 
 
 
+def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray, omega: np.ndarray | None = None,
+                      alpha: np.ndarray | None = None) -> list[str]:
+    """Uncertainty of a selected group's identified shape (``hd_twin.identify.vp_shape``); statements.
+
+    At the profile search's choice: the block-robust sandwich standard error of every shape parameter from
+    the Jacobian of the leave-one-block-out residuals (recorded as ``<name>_se`` in the term's parameters;
+    the block jackknife ``<name>_sd`` restarts from the full-data optimum and misses flat directions of the
+    CV surface). Then a least-squares refinement of the same CV objective from that choice: when it lowers
+    the CV error only by running a parameter onto a bound of its range (a degenerate optimum) or leaves a
+    parameter uncertain beyond its size, the parameter is reported as weakly identified (``<name>_weak`` =
+    1) and the choice is kept (a bound is not an estimate). For a speed shape (omega_s): how many fit rows
+    carry the curve in each octave of speed around omega_s, and at what acceleration (where J alpha_m dwarfs
+    the friction, the curve there is interpolated by its law rather than measured).
+    """
+    rows = y.shape[0]
+    start = {s.name: float(cand.nonlinear[s.name]) for s in cand.shapes}
+    try:
+        at = vp_shape(y, design, block, cand.shapes, start, refine=False)
+        ref = vp_shape(y, design, block, cand.shapes, start, refine=True)
+    except (np.linalg.LinAlgError, ValueError) as exc:  # a singular design at the chosen shape: say so, go on
+        return [f"{cand.name}: shape uncertainty not computed ({type(exc).__name__}: {exc})"]
+    weak = list(dict.fromkeys(at.weak + ref.weak))
+    for k in at.shape:
+        cand.nonlinear[f"{k}_se"] = at.se[k]
+        cand.nonlinear[f"{k}_weak"] = float(k in weak)
+    out = [f"{cand.name}: shape " + ", ".join(f"{k} = {v:.3g} +- {at.se[k]:.2g}" for k, v in at.shape.items())
+           + f" (sandwich SE of the CV residuals' variable projection, {rows} rows)"]
+    moved = {k: v for k, v in ref.shape.items() if abs(v - at.shape[k]) > 1e-6 * max(abs(v), 1e-12)}
+    if moved:
+        out.append(f"{cand.name}: a least-squares refinement of the CV objective moves the shape to "
+                   + ", ".join(f"{k} = {v:.3g}" for k, v in ref.shape.items())
+                   + f" (CV RMSE {at.cv_rmse:.4g} -> {ref.cv_rmse:.4g})"
+                   + ("; " + "; ".join(ref.notes) + "; the profile choice is kept" if ref.weak else ""))
+    if weak:
+        out.append(f"{cand.name}: weakly identified on these data: {', '.join(weak)}"
+                   + ("; " + "; ".join(at.notes) if at.notes else ""))
+    if omega is not None and "omega_s" in at.shape:
+        ws, aw = at.shape["omega_s"], np.abs(omega)
+        parts = []
+        for a, b in ((0.25, 0.5), (0.5, 1.0), (1.0, 2.0), (2.0, 4.0)):
+            band = (aw >= a * ws) & (aw < b * ws)
+            acc = (f", |alpha_m| {np.median(np.abs(alpha[band])):.3g}" if alpha is not None and band.any() else "")
+            parts.append(f"{a * ws:.3g}..{b * ws:.3g} rad/s: {int(band.sum())} rows{acc}")
+        out.append(f"{cand.name}: fit rows per octave of |omega_m| around omega_s (median |alpha_m| in rad/s^2; where "
+                   "J alpha_m dwarfs the friction, the curve is carried by its law, not measured): " + "; ".join(parts))
+    return out
+
+
 def baseline_cv_rmse(ds: Dataset, heldout: np.ndarray, rows: np.ndarray) -> float | None:
     """Cross-validated RMSE of the plain tau_m baseline (tanh width by the CV profile) on the fit rows ``rows``
     (fit bags, moving); None when tau_m or the friction direction cannot be fitted."""
@@ -1143,3 +1208,57 @@ def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.nda
     return ds_logged, (f"speed timing: re-timed speeds ({lag}) do not lower the CV error of the tau_m baseline on "
                        f"the fit bags by {opt.min_gain:.0%} ({cv_l:.4g} -> {cv_r:.4g} N*m, {gain:+.1%}); speeds used "
                        "as logged")
+
+
+def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
+                        default_s: float = 0.02) -> tuple[Dataset, str]:
+    """The motor acceleration's derivative window and timing, identified on the fit bags by the baseline's CV error.
+
+    alpha_m is the smoothed derivative of the logged speed (Savitzky-Golay, quadratic); its window is a
+    filter bandwidth, not a property of the drive: too long and J alpha_m lags every fast transient (an
+    error of the size of the friction that the friction terms then bend to absorb), too short and the noise
+    of the speed is differentiated into it. With it, the inertia torque's timing against the logged torque
+    (a logger that averages the current over its period while the speed is placed at an angle's sampling
+    instant: half a period, J alpha_m' tau_a, large in fast transients): ``alpha_timing`` adds the column
+    alpha_m' (coefficient J tau_a, first order in tau_a) to the baseline. ``make(window_s, timing)`` builds the
+    dataset (same speeds and rows as ``ds``). Candidates: windows of 5, 9, 17 and 33 samples at the log rate (the
+    shortest quadratic Savitzky-Golay derivative, doubling) and the default ``default_s``, each without and with
+    the timing column; the one with the lowest
+    cross-validated error of the plain tau_m baseline on the fit bags (the same rows for all) is used when it
+    lowers the CV mean squared error against the default by ``opt.min_gain`` (the rule every baseline change
+    follows), else the default stays. Returns the dataset and a statement (empty when nothing was tested)."""
+    opt = opt or Options()
+    t = ds.t[ds.bag == ds.bag[0]]
+    dt = float(np.median(np.diff(t))) if len(t) > 2 else 0.0
+    if not dt > 0:
+        return ds, ""
+    still, _ = standstill_rows(ds, opt.standstill_sigmas)
+    cv_d = baseline_cv_rmse(ds, heldout, ~still)
+    if cv_d is None:
+        return ds, ""
+    best = (cv_d, default_s, False, ds)
+    tried = [f"{default_s * 1e3:.3g} ms: {cv_d:.4g}"]
+    for timing in (False, True):
+        for win in [default_s] + [k * dt for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]:
+            if win == default_s and not timing:
+                continue
+            d2 = make(win, timing)
+            if d2.n != ds.n:
+                continue
+            cv = baseline_cv_rmse(d2, heldout, ~still)
+            if cv is None:
+                continue
+            tried.append(f"{win * 1e3:.3g} ms{' + timing' if timing else ''}: {cv:.4g}")
+            if cv < best[0]:
+                best = (cv, win, timing, d2)
+    cv, win, timing, d2 = best
+    gain = 1.0 - (cv / cv_d) ** 2 if cv_d > 0 else 0.0
+    what = f"{win * 1e3:.3g} ms" + (" with the inertia torque's timing (J tau_a dalpha_m/dt)" if timing else "")
+    if d2 is not ds and gain >= opt.min_gain:
+        d2.notes = list(ds.notes)
+        d2.speed_lags = dict(ds.speed_lags)
+        return d2, (f"acceleration: identified on the fit bags, {what} (CV RMSE of the tau_m baseline {cv_d:.4g} -> "
+                    f"{cv:.4g} N*m, {gain:.1%}, against the default {default_s * 1e3:.3g} ms; tried {'; '.join(tried)}); "
+                    "used")
+    return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms) is kept (best "
+                f"alternative {what}, CV gain {gain:+.1%} < {opt.min_gain:.0%}; tried {'; '.join(tried)})")

@@ -183,10 +183,16 @@ def play(x: np.ndarray, r: float, segment: np.ndarray | None = None) -> np.ndarr
 
 
 def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
-                       speed_lags: dict[str, float] | None = None) -> tuple[dict[str, np.ndarray], list[str]]:
+                       speed_lags: dict[str, float] | None = None,
+                       alpha_window_s: float | None = None,
+                       alpha_timing: bool = False) -> tuple[dict[str, np.ndarray], list[str]]:
     """Signal table of one mission (full length, may contain NaN) and notes on what was done.
 
-    ``speed_lags``: ``{speed: tau}`` from :func:`speed_timing`; those logged speeds are re-timed."""
+    ``speed_lags``: ``{speed: tau}`` from :func:`speed_timing`; those logged speeds are re-timed.
+    ``alpha_window_s``: window of the motor acceleration's derivative filter (default ``deriv_window_s``;
+    ``core.choose_alpha_window`` identifies it on the fit bags). ``alpha_timing``: also ``alpha_m_dot``, the
+    derivative of alpha_m with the same window (the baseline's J tau_a alpha_m' column: the inertia torque's
+    timing against the logged torque)."""
     notes: list[str] = []
     name = m.report.path or m.meta.actuator_id
     n = m.n
@@ -211,7 +217,10 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
         for w, tau in (speed_lags or {}).items():
             s[w] = retime_speed(s[w], m.t, seg, tau, deriv_window_s)
     s["i_q"] = s["tau_m"] / kt
-    s["alpha_m"] = _derivative(s["omega_m"], m.t, seg, deriv_window_s)
+    aw_s = deriv_window_s if alpha_window_s is None else alpha_window_s
+    s["alpha_m"] = _derivative(s["omega_m"], m.t, seg, aw_s)
+    if alpha_timing:
+        s["alpha_m_dot"] = _derivative(s["alpha_m"], m.t, seg, aw_s)
     if np.any(np.isfinite(s["Q_red"])):
         s["Q_red_over_N"] = s["Q_red"] / N
     s["phi"] = s["theta_f"] - s["theta_m"] / N  # output-side twist (hd_twin.physics convention), rad
@@ -250,11 +259,13 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
 
 def dataset_from_missions(missions: list[Mission], names: list[str] | None = None, *, blocks_per_bag: int = 5,
                           required: tuple[str, ...] = ("theta_m", "omega_m", "tau_m"),
-                          retime_speeds: bool = True) -> Dataset:
+                          retime_speeds: bool = True, alpha_window_s: float | None = None,
+                          alpha_timing: bool = False) -> Dataset:
     """Concatenate missions into one :class:`Dataset`.
 
     Logged speeds are first put on their angles' time base by the identified sensor model of
-    :func:`speed_timing` (``retime_speeds=False``: as logged).
+    :func:`speed_timing` (``retime_speeds=False``: as logged). ``alpha_window_s``: the motor acceleration's
+    derivative window (default: that of :func:`signals_of_mission`); ``alpha_timing``: add ``alpha_m_dot``.
 
     A signal that is entirely missing in any bag is dropped from all bags (the
     same model must apply everywhere); ``required`` signals must be present.
@@ -266,7 +277,7 @@ def dataset_from_missions(missions: list[Mission], names: list[str] | None = Non
     tables = []
     gear, kt = None, None
     for m, nm in zip(missions, names):
-        s, nn = signals_of_mission(m, speed_lags=lags)
+        s, nn = signals_of_mission(m, speed_lags=lags, alpha_window_s=alpha_window_s, alpha_timing=alpha_timing)
         tables.append(s)
         notes += nn
         if gear is None:

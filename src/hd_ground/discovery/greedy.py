@@ -76,7 +76,8 @@ def greedy_discover(ds: Dataset, target: str, heldout: np.ndarray, *, min_gain: 
         scale = float(np.quantile(np.abs(w[fit]), 0.9))
         best = None
         for eps in np.geomspace(1e-3, 0.3, 8) * scale:
-            cols = [sig["alpha_m"], np.tanh(w / eps), w] + ([sig["Q_red_over_N"]] if "Q_red_over_N" in avail else [])
+            cols = [sig["alpha_m"], np.tanh(w / eps), w] + ([sig["Q_red_over_N"]] if "Q_red_over_N" in avail else []) + (
+                [sig["alpha_m_dot"]] if "alpha_m_dot" in avail else [])  # discover's acceleration timing, if chosen
             X = np.stack(cols, 1)
             r = y[fit] - X[fit] @ _lstsq(X[fit], y[fit])
             if best is None or r @ r < best[0]:

@@ -19,8 +19,8 @@ import numpy as np
 from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
-from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_speed_timing, discover_signal, split_fit_heldout,
-                   static_term)
+from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing, discover_signal,
+                   split_fit_heldout, static_term)
 from .data import Dataset, DiscoveryError, dataset_from_missions
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
@@ -120,6 +120,13 @@ def run_discovery(
         ds, st_ = choose_speed_timing(dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag,
                                                             retime_speeds=False), ds, ho, opt)
         ds.notes.append(st_)
+    if opt.alpha_window == "identify":
+        # the acceleration's derivative window, by the same rule on the fit bags (same speeds as chosen above)
+        ds, st_ = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
+            missions, names, blocks_per_bag=blocks_per_bag, retime_speeds=re, alpha_window_s=win,
+            alpha_timing=timing), ds, ho, opt)
+        if st_:
+            ds.notes.append(st_)
     for n_ in ds.notes:
         log(f"note: {n_}")
     split = ({"mode": "bags", "heldout": [names[i] for i in ho_bags]} if ho_bags

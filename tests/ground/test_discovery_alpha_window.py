@@ -1,0 +1,82 @@
+"""The motor acceleration's derivative window is identified on the fit bags (``core.choose_alpha_window``).
+
+Synthetic plants written here (numpy only, no hd_sim): tau_m = J alpha + T_C tanh(omega/eps) + b omega + noise,
+with alpha_m derived from the measured speed by the window under test. Fast transients (a 12 Hz motion: a
+20 ms Savitzky-Golay derivative attenuates and smears its acceleration) need a shorter window; a slow motion
+with a noisy speed needs a longer one (a short window differentiates the noise into J alpha). A torque logged
+later than the speed's instants gets the inertia torque's timing column, J tau_a alpha_m', with tau_a recovered.
+"""
+
+import numpy as np
+import pytest
+
+from hd_ground.discovery.core import Options, choose_alpha_window, discover_signal
+from hd_ground.discovery.data import Dataset, _derivative
+
+FS, T_BAG, N_BAGS, J, T_C, EPS, B = 1000.0, 4.0, 4, 0.01, 1.0, 0.5, 0.01
+
+
+def _plant(f_motion: float, speed_noise: float, seed: int = 0, tau_a: float = 0.0):
+    rng = np.random.default_rng(seed)
+    n = int(FS * T_BAG)
+    t = np.arange(n) / FS
+    ws, taus = [], []
+    for i in range(N_BAGS):
+        a, f = 20.0 + 3 * i, f_motion * (1 + 0.1 * i)
+        w = a * np.sin(2 * np.pi * f * t) + 0.3 * a * np.sin(2 * np.pi * 0.37 * f * t + i)
+        ts = t + tau_a  # the torque's instants: the inertia torque tau_a later than the speed's
+        al = a * 2 * np.pi * f * np.cos(2 * np.pi * f * ts) + 0.3 * a * 2 * np.pi * 0.37 * f * np.cos(2 * np.pi * 0.37 * f * ts + i)
+        taus.append(J * al + T_C * np.tanh(w / EPS) + B * w + rng.normal(0, 0.02, n))
+        ws.append(w + rng.normal(0, speed_noise, n))
+    bag = np.repeat(np.arange(N_BAGS), n)
+    frac = np.tile(t / t[-1], N_BAGS)
+    block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
+    tt = np.tile(t, N_BAGS)
+    omega = np.concatenate(ws)
+    theta = np.concatenate([np.cumsum(w) / FS for w in ws])
+
+    def make(win, timing=False):
+        sig = {"theta_m": theta, "omega_m": omega, "tau_m": np.concatenate(taus),
+               "alpha_m": _derivative(omega, tt, bag, win)}
+        if timing:
+            sig["alpha_m_dot"] = _derivative(sig["alpha_m"], tt, bag, win)
+        return Dataset(sig, bag, block, frac, tt, bag.copy(), [f"bag{i}" for i in range(N_BAGS)], 100.0, 0.1)
+    return make, bag == N_BAGS - 1
+
+
+def test_fast_transients_get_a_shorter_acceleration_window():
+    make, ho = _plant(12.0, 0.01)
+    ds, note = choose_alpha_window(make, make(0.02), ho, Options())
+    assert _chosen_ms(note) < 20.0, note
+    assert not np.allclose(ds.signals["alpha_m"], make(0.02).signals["alpha_m"])  # the data use it
+
+
+def test_slow_motion_with_a_noisy_speed_gets_a_longer_window():
+    make, ho = _plant(0.3, 0.2)
+    ds, note = choose_alpha_window(make, make(0.02), ho, Options())
+    assert _chosen_ms(note) > 20.0, note
+
+
+def test_default_window_kept_when_no_window_gains_min_gain():
+    make, ho = _plant(0.3, 0.2)
+    ds0 = make(0.02)
+    ds, note = choose_alpha_window(make, ds0, ho, Options(min_gain=0.9))
+    assert ds is ds0 and "kept" in note, note
+
+
+def test_inertia_torque_timing_is_identified():
+    tau_a = 2e-3  # the logged torque 2 ms after the speed's instants
+    make, ho = _plant(12.0, 0.01, tau_a=tau_a)
+    ds, note = choose_alpha_window(make, make(0.02), ho, Options())
+    assert "timing" in note and "alpha_m_dot" in ds.signals, note
+    bp = discover_signal(ds, "tau_m", ho).baseline_params
+    assert bp["J_eq"] == pytest.approx(J, rel=0.05)
+    assert bp["J_tau_a"] / bp["J_eq"] == pytest.approx(tau_a, rel=0.2), bp
+    # without the offset the timing column does not pay for itself
+    make0, ho0 = _plant(12.0, 0.01)
+    assert "timing" not in choose_alpha_window(make0, make0(0.02), ho0, Options())[1].split("; tried")[0]
+
+
+def _chosen_ms(note: str) -> float:
+    assert "identified on the fit bags, " in note, note
+    return float(note.split("identified on the fit bags, ")[1].split(" ms")[0])
