@@ -185,7 +185,7 @@ def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -
             # (K_a_2) contributes more
             e = next((x for x in rep["effects"] if (x["signal"], x["name"], x["variable"], x["order"]) == key
                       and "A_2" in x["parameters"]), e)
-            pr = e["parameters"]
+            pr = dict(e["parameters"])
             sig = next(s for s in rep["signals"] if s["signal"] == "Q_red")
             K = sig["refit_baseline_parameters"]["K"]
             bl = next((x for x in rep["effects"] if x["signal"] == "Q_red" and x["name"] == "backlash"), None)
@@ -196,7 +196,12 @@ def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -
             Q = np.concatenate([read_mission(p).Q_red for p in fit_paths])
             load = next((x for x in rep["effects"] if x is not e and (x["signal"], x["name"], x["order"]) ==
                          (key[0], key[1], key[3]) and "K_a_2" in x["parameters"]), None)
-            if load is None:  # one amplitude: compare with the mean of A2 (1 + a_T |T|/T_rated) over the fit data
+            if "A_2" not in pr and "K_a_2" in pr:  # only the load-dependent form K a_2 |w|: its mean amplitude
+                w = np.concatenate([(lambda m: m.theta_m / m.meta.gear_ratio - m.theta_f)(read_mission(p))
+                                    for p in fit_paths])
+                A2_eff = P["A2"] * (1.0 + P["a_T"] * float(np.nanmean(np.abs(Q))) / P["T_rated"])
+                add("A_2 / K [rad] (K_a_2 mean|w| / K)", pr["K_a_2"] * float(np.nanmean(np.abs(w))) / K, A2_eff, 0.20)
+            elif load is None:  # one amplitude: compare with the mean of A2 (1 + a_T |T|/T_rated) over the fit data
                 A2_eff = P["A2"] * (1.0 + P["a_T"] * float(np.nanmean(np.abs(Q))) / P["T_rated"])
                 add("A_2 / K [rad]", pr["A_2"] / K, A2_eff, 0.20)
             else:  # K theta_KE = K A2 sin(.) + K A2 a_T (K |w|) / T_rated sin(.): both parts
