@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from hd_twin.data import edge_half_window
 from hdphm.cli import main
 from tests.robustness import foreign as FB
 
@@ -49,21 +50,27 @@ def test_twin_eval_repeats_suspect_data(foreign_twin, foreign_bags, name, capsys
 
 
 def test_twin_eval_across_a_dropout(foreign_twin, foreign_bags, capsys):
-    """5 s mission with a 2 s hole: both segments scored (3000 samples), nothing bridged."""
+    """5 s mission with a 2 s hole: both segments scored (3000 samples less each segment's two edge
+    half-windows, where the derivative is undefined: hd_twin.data.edge_samples), nothing bridged."""
     rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["dropout"])
-    assert rc == 0 and met["n"] == 3000 and met["r2"] > 0.3
+    m = edge_half_window(1e-3)
+    assert rc == 0 and met["edge_excluded"] == 2 * 2 * m and met["n"] == 3000 - 4 * m and met["r2"] > 0.3
     # the 5 s inspection mission has larger steps than the 2 s training missions: an honest range note
     assert all("outside the training data" in s for s in met.get("notes", []))
 
 
 def test_twin_eval_very_short_mission(foreign_twin, foreign_bags, capsys):
     rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["short"])  # 0.5 s: one LSTM warm-up, scored whole
-    assert rc == 0 and met["n"] == 500 and math.isfinite(met["rmse"]) and math.isfinite(met["r2"])
+    m = edge_half_window(1e-3)
+    assert rc == 0 and met["n"] + met["edge_excluded"] == 500 and met["edge_excluded"] == 2 * m
+    assert math.isfinite(met["rmse"]) and math.isfinite(met["r2"])
 
 
 def test_twin_eval_10khz_bag_is_decimated(foreign_twin, foreign_bags, capsys):
     rc, met, _ = _eval(capsys, foreign_twin, foreign_bags["fs10k"])
-    assert rc == 0 and met["n"] == 600 and math.isfinite(met["rmse"])  # 6000 samples at 10 kHz -> 1 kHz
+    # 6000 samples at 10 kHz -> 1 kHz (600), less the segment's two edge half-windows
+    assert rc == 0 and met["n"] + met["edge_excluded"] == 600 and met["edge_excluded"] == 2 * edge_half_window(1e-3)
+    assert math.isfinite(met["rmse"])
 
 
 def test_twin_eval_refusals_are_one_line(foreign_twin, foreign_bags, capsys):
