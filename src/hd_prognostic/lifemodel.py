@@ -1488,7 +1488,7 @@ class _UKF:
 
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
              progress: bool = False, n_draws: int = 20, threshold: str = "auto",
-             failure_level: float | None = None, path: str = "power") -> LifeModel:
+             failure_level: float | None = None, path: str = "power", failure_at: str = "interval") -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
@@ -1496,7 +1496,8 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     for name, units in candidates.items():
         try:
             fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
-                                       threshold=threshold, failure_level=failure_level, path=path)
+                                       threshold=threshold, failure_level=failure_level, path=path,
+                                       failure_at=failure_at)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -1508,7 +1509,7 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     m = fits[best]
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
         m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
-                          threshold=m.threshold, failure_level=failure_level, path=m.path)
+                          threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at)
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
         if "path_aic" in fits[best].fit_info:
             m.fit_info["path_aic"] = fits[best].fit_info["path_aic"]
