@@ -40,6 +40,11 @@ closed-form): ``P(failure) = P(M < Y <= y_f) ~ Phi((m_f - Y0)/sqrt(s_Y^2 + v_f))
 the sign of c), ``y_f ~ N(m_f, v_f)`` the unrecorded HI at the failure time (offset posterior, AR(1) residual carried
 on from the last record), M the record's extreme; censored: ``P(Y > M)``. Its prognosis simulates the unit's future
 HI records from its posterior until they pass a threshold drawn from its law truncated to ``Y > M``.
+``failure_at="crossing"`` (failure time = the time the measured HI reached the level, continuous records): the event
+term is that crossing time's density, ``N(Y0; m_f, s_Y^2 + v_f) |c dL/d ln E|`` at the failure exposure; with a known
+``failure_level`` the defined level and a fitted one are compared by AIC (a path whose shape is wrong between the last
+records and the level does not reach the defined level at the failure times: Virkler, records up to 39 mm, failure at
+49.8 mm).
 
 Parameter draws: uniform prior on the standard deviations with >= 3 failures (Gelman 2006's default); with 2, where
 that posterior is improper, half-Cauchy priors on the between-unit scales (``s``: scale 1, ``s_a`` and ``s_Y``: the
