@@ -393,6 +393,8 @@ def _louo_subset(units, eols, args, name, level=None):
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
         sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
+        if m.fit_info.get("level"):  # crossing likelihood: the failure level fixed at its definition or fitted
+            sg["threshold"] += f" ({m.fit_info['level']} level)"
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
