@@ -281,7 +281,7 @@ def _fit_life(args) -> int:
     for n in dict.fromkeys(notes):
         print(f"note: {n}", file=sys.stderr)
     m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws, threshold=args.threshold,
-                 failure_level=args.failure_level, path=args.path)
+                 failure_level=args.failure_level, path=args.path, failure_at=args.failure_at)
     m.to_json(args.out)
     fi = m.fit_info
     print(json.dumps({"exposure": m.exposure, "E_ref": m.E_ref, **m.to_json()["readable"],
@@ -290,6 +290,8 @@ def _fit_life(args) -> int:
                       "exposure_candidates": fi.get("exposure_candidates"),
                       "threshold_candidates": fi.get("threshold_candidates"),
                       "path": m.path, "path_aic": fi.get("path_aic"),
+                      "failure_at": fi.get("failure_at", "interval"), "level": fi.get("level"),
+                      "level_aic": fi.get("level_aic"),
                       "parameter_draws": len(m.draws),
                       "parameter_draws_ess": fi.get("parameter_uncertainty", {}).get("ess")}, indent=1, default=float))
     print(f"wrote {args.out}")
@@ -423,7 +425,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "blow-up) shape, or auto: both fitted, the lower AIC kept (a fit costs ~5x the power law's)")
     p.add_argument("--failure-level", type=float, default=None, metavar="HI",
                    help="when failure is defined as the measured HI reaching a known level (e.g. 1.6 Ah, 0.0498 m): "
-                        "that level, the observable threshold's median (not fitted then)")
+                        "that level, the observable threshold's median (not fitted then; with --failure-at "
+                        "crossing: this level or one fitted in the path's coordinates, the lower AIC)")
+    p.add_argument("--failure-at", choices=("interval", "crossing"), default="interval",
+                   help="interval: a failure at t_f happened between the last record and t_f (found failed); "
+                        "crossing: t_f is the time the measured HI reached the failure level (continuous records, "
+                        "e.g. Virkler's cycles at 49.8 mm): its density is scored (observable threshold only)")
     p.set_defaults(func=_guard(_fit_life))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")

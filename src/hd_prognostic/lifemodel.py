@@ -40,6 +40,11 @@ closed-form): ``P(failure) = P(M < Y <= y_f) ~ Phi((m_f - Y0)/sqrt(s_Y^2 + v_f))
 the sign of c), ``y_f ~ N(m_f, v_f)`` the unrecorded HI at the failure time (offset posterior, AR(1) residual carried
 on from the last record), M the record's extreme; censored: ``P(Y > M)``. Its prognosis simulates the unit's future
 HI records from its posterior until they pass a threshold drawn from its law truncated to ``Y > M``.
+``failure_at="crossing"`` (failure time = the time the measured HI reached the level, continuous records): the event
+term is that crossing time's density, ``N(Y0; m_f, s_Y^2 + v_f) |c dL/d ln E|`` at the failure exposure; with a known
+``failure_level`` the defined level and a fitted one are compared by AIC (a path whose shape is wrong between the last
+records and the level does not reach the defined level at the failure times: Virkler, records up to 39 mm, failure at
+49.8 mm).
 
 Parameter draws: uniform prior on the standard deviations with >= 3 failures (Gelman 2006's default); with 2, where
 that posterior is improper, half-Cauchy priors on the between-unit scales (``s``: scale 1, ``s_a`` and ``s_Y``: the
@@ -343,9 +348,10 @@ class _Batch:
     at once on a (units x grid) array; only the shape exponent b changes the sufficient statistics."""
 
     def __init__(self, units: list[UnitHistory], E_ref: float, censor_at: list | None = None,
-                 quantities: list[str] | None = None, path: str = "power"):
+                 quantities: list[str] | None = None, path: str = "power", crossing: bool = False):
         self.U = len(units)
         self.path = path
+        self.crossing = crossing  # failure time = the measured HI's crossing time (density), not an interval
         idx, ys, lx, link = [], [], [], []
         self.llo, self.lhi, self.lcens = (np.full(self.U, np.nan) for _ in range(3))
         qi, qu, qx, qv = [], [], [], []
@@ -593,9 +599,21 @@ class _Batch:
                 Lk = _path_L(self.path, z[fl], self.lx_last[fl, None], th)
                 mf = ma * (1 - rn) + c * (Lf - rn * Lk) + rn * self.y_last[fl, None]
             vf = (1 - rn) ** 2 * va + sig * sig * (1 - rn * rn) / (1 - rho * rho)
-            al = (sg * mf - sg * Y0) / np.sqrt(sY * sY + vf)
-            be = (M[fl] - sg * Y0) / sY  # (units, 1): one value per unit
-            out[fl] = _log_sub_ndtr(al, be)
+            if getattr(self, "crossing", False):
+                # the failure time is the time the measured HI reached the unit's level: density of that
+                # crossing time, p(Y_i = y(t_f)) |dy/dt| (Jacobian in log exposure; the exposure rate is data)
+                vt = sY * sY + vf
+                if self.path == "power":
+                    dL = b * r[fl] * np.exp(b * self.lhi[fl])[:, None]
+                else:
+                    uf = np.minimum(np.exp(z[fl] + self.lhi[fl, None]), _PARIS_UMAX)
+                    dL = b * uf * np.exp((-b - 1.0) * np.log1p(-uf)) * math.exp(-th.get("log_D0", 0.0))
+                with np.errstate(divide="ignore"):
+                    out[fl] = -0.5 * (mf - Y0) ** 2 / vt - 0.5 * np.log(2 * math.pi * vt) + np.log(abs(c) * dL)
+            else:
+                al = (sg * mf - sg * Y0) / np.sqrt(sY * sY + vf)
+                be = (M[fl] - sg * Y0) / sY  # (units, 1): one value per unit
+                out[fl] = _log_sub_ndtr(al, be)
         ce = np.isfinite(self.lcens)
         if ce.any():
             out[ce] += special.log_ndtr((sg * Y0 - M[ce]) / sY)
@@ -681,6 +699,7 @@ class _SubBatch(_Batch):
         m = pos[base.qu] >= 0 if len(base.qu) else np.zeros(0, bool)
         self.qi, self.qu, self.qx, self.qv = base.qi[m], pos[base.qu[m]], base.qx[m], base.qv[m]
         self.path = base.path
+        self.crossing = getattr(base, "crossing", False)
         if self.path != "power":  # the records of these units (z-dependent sums are per record)
             rec = pos[base.idx] >= 0
             self.idx, self.lx, self.link, self.y = pos[base.idx[rec]], base.lx[rec], base.link[rec], base.y[rec]
@@ -877,7 +896,8 @@ class LifeModel:
 
     def log_marginal(self, units: list[UnitHistory]) -> np.ndarray:
         """Log marginal likelihood of each unit's record and events under this model."""
-        bt = _Batch(units, self.E_ref, quantities=sorted(self.inspections), path=self.path)
+        bt = _Batch(units, self.E_ref, quantities=sorted(self.inspections), path=self.path,
+                    crossing=self.fit_info.get("failure_at") == "crossing")
         z, f, dz = bt.grid(self.theta, self.b, self.inspections)
         return _lse(f) + np.log(dz)
 
@@ -886,7 +906,7 @@ class LifeModel:
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
             seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
-            path: str = "power") -> "LifeModel":
+            path: str = "power", failure_at: str = "interval") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -904,7 +924,24 @@ class LifeModel:
         ``h(r E/E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1``: Paris' law with dK ~ sqrt(a) integrated, per-unit
         rate r = the inverse of the unit's blow-up exposure, exponent p = 2/(m-2) shared; one parameter more
         than the power law: D0 with the latent threshold, mu with the observable one) or ``auto`` (every
-        family x threshold fitted on these units, the lowest AIC kept; never chosen per scored unit)."""
+        family x threshold fitted on these units, the lowest AIC kept; never chosen per scored unit).
+
+        ``failure_at``: ``interval`` (a failure at t_f happened between the last record and t_f: found failed
+        at t_f) or ``crossing`` (continuous records, failure defined on the measured HI: t_f is the time the
+        measured HI reached the unit's level; its likelihood is the density of that crossing time,
+        ``N(Y0; m_f, s_Y^2 + v_f) |dy/dt(t_f)|``, observable threshold only). With ``crossing`` and a
+        ``failure_level``, the level in the model's coordinates is also fitted (one parameter more) and the
+        lower AIC kept: where the path family's shape is wrong between the last records and the failure level
+        (Virkler: no record between 39 mm and the 49.8 mm failure length), the path does not reach the defined
+        level at the failure times and a fixed level leaves that bias to the level's scatter s_Y."""
+        if failure_at not in ("interval", "crossing"):
+            raise ValueError(f"life-model fit: failure_at {failure_at!r} is not one of interval, crossing")
+        if failure_at == "crossing" and threshold == "latent":
+            raise ValueError("life-model fit: failure_at='crossing' needs the observable threshold (failure defined "
+                             "on the measured HI)")
+        crossing = failure_at == "crossing"
+        if crossing:
+            threshold = "observable"
         if path not in PATHS + ("auto",):
             raise ValueError(f"life-model fit: path {path!r} is not one of {', '.join(PATHS)}, auto")
         if threshold not in THRESHOLDS + ("auto",):
@@ -963,16 +1000,17 @@ class LifeModel:
             coef, *_ = np.linalg.lstsq(A, V, rcond=None)
             sd = float(np.std(V - A @ coef)) or abs(float(np.mean(V))) * 0.1 or 1e-6
             insp0[q] = {"alpha": float(coef[0]), "beta": float(coef[1]), "log_tau": math.log(sd)}
-        batches = {fam: _Batch(units, E_ref, quantities=qs, path=fam) for fam in PATHS}
+        batches = {fam: _Batch(units, E_ref, quantities=qs, path=fam, crossing=crossing) for fam in PATHS}
         lends = np.log(np.array([e for e in ends if e > 0]) / E_ref)
         ik = [f"{q}|{k}" for q in qs for k in ("alpha", "beta", "log_tau")]
         iscale = [max(abs(insp0[q][k]), 1e-9) if k != "log_tau" else 1.0
                   for q in qs for k in ("alpha", "beta", "log_tau")]
         ix0 = [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")]
 
-        def setup(kind, fam="power"):
+        def setup(kind, fam="power", fix_level=True, start=None):
             """(parameter names, start in the optimiser's coordinates, scale, unpack, nll) of one threshold kind."""
             batch = batches[fam]
+            flevel = failure_level if fix_level else None
             if fam == "paris":  # start: p = 1, median unit at u = 1/2 at its end (h = 1), rate scatter of the ends
                 names = list(cls.PARAMS if kind == "latent" else cls.PARAMS_OBS)
                 yfa = np.array(yf)
@@ -981,7 +1019,7 @@ class LifeModel:
                           Y0=float(np.median(yfa)), log_sY=math.log(max(float(np.std(yfa)), 0.5 * sig0)))
                 scale = {"c": abs(c0), "a0": sig0 + abs(theta0["a0"]) * 0.01, "Y0": sig0 + abs(t0["Y0"]) * 0.01}
                 names = names + (["log_D0"] if kind == "latent" else ["mu"])
-                if kind == "observable" and failure_level is not None:
+                if kind == "observable" and flevel is not None:
                     names.remove("Y0")
                 scale = [scale.get(k, 1.0) for k in names]
             elif kind == "latent":
@@ -994,12 +1032,15 @@ class LifeModel:
                           log_sY=math.log(max(float(np.std(yfa)), 0.5 * sig0)))
                 ysc = sig0 + abs(t0["Y0"]) * 0.01
                 scale = [1.0, 1.0, abs(t0["c"]), sig0 + abs(theta0["a0"]) * 0.01, 1.0, 1.0, ysc, 1.0, 1.0]
-                if failure_level is not None:  # the failure definition's level is known: Y0 is not fitted
+                if flevel is not None:  # the failure definition's level is known: Y0 is not fitted
                     j = names.index("Y0")
                     names.pop(j)
                     scale.pop(j)
             sc = np.array(scale + iscale)
-            x0 = np.array([t0[k] for k in names] + ix0) / sc
+            if start is not None:  # a nested model's optimum (theta, inspections) as the start
+                t0 = dict(t0, **start[0])
+                ix0_ = [start[1][q][k] for q in qs for k in ("alpha", "beta", "log_tau")]
+            x0 = np.array([t0[k] for k in names] + (ix0_ if start is not None else ix0)) / sc
             npar = len(names)
             lo_sY = math.log(hi_scale) - 12.0
 
@@ -1009,8 +1050,8 @@ class LifeModel:
                 if kind == "observable" and fam == "power":
                     th["mu"] = 0.0
                 if kind == "observable":
-                    if failure_level is not None:
-                        th["Y0"] = float(failure_level)
+                    if flevel is not None:
+                        th["Y0"] = float(flevel)
                     th.pop("log_D0", None)
                 ins = {q: {k: float(x[npar + 3 * j + i]) for i, k in enumerate(("alpha", "beta", "log_tau"))}
                        for j, q in enumerate(qs)}
@@ -1037,8 +1078,8 @@ class LifeModel:
 
             return names, x0, unpack, nll
 
-        def ml(kind, fam="power"):
-            names, xs0, unpack, nll = setup(kind, fam)
+        def ml(kind, fam="power", fix_level=True, start=None):
+            names, xs0, unpack, nll = setup(kind, fam, fix_level, start)
             # quasi-Newton first (finite-difference gradients of a smooth quadrature), then a Nelder-Mead polish
             # (robust where the adaptive grid makes the finite differences noisy)
             r = optimize.minimize(nll, xs0, method="L-BFGS-B", options={"maxiter": 300, "eps": 1e-6})
@@ -1052,6 +1093,16 @@ class LifeModel:
         kinds = THRESHOLDS if threshold == "auto" else (threshold,)
         fams = PATHS if path == "auto" else (path,)
         allfits = {(f_, k): ml(k, f_) for f_ in fams for k in kinds}
+        level_aic = None
+        if crossing and failure_level is not None:  # the defined level vs a fitted one (AIC, training units)
+            level_aic = {}
+            for f_ in fams:
+                fx = allfits[(f_, "observable")]  # nested: the fitted level starts at the fixed one's optimum
+                free = ml("observable", f_, fix_level=False, start=fx["unpack"](fx["r2"].x))
+                level_aic[f_] = {"fixed": allfits[(f_, "observable")]["aic"], "fitted": free["aic"]}
+                if free["aic"] < allfits[(f_, "observable")]["aic"]:
+                    allfits[(f_, "observable")] = free
+                    free["free_level"] = True
         for (f_, k), v in allfits.items():
             if progress:
                 print(f"  path {f_}, threshold {k}: log-likelihood {-v['r2'].fun:.2f}, AIC {v['aic']:.2f}", flush=True)
@@ -1113,8 +1164,13 @@ class LifeModel:
         if len(fits) > 1:
             info["threshold_candidates"] = {k: float(-v["r2"].fun) for k, v in fits.items()}
             info["threshold_aic"] = {k: float(v["aic"]) for k, v in fits.items()}
-        if kind == "observable" and failure_level is not None:
+        if kind == "observable" and failure_level is not None and not F.get("free_level"):
             info["failure_level"] = float(failure_level)
+        if crossing:
+            info["failure_at"] = "crossing"
+        if level_aic is not None:
+            info["level_aic"] = level_aic[fam]
+            info["level"] = "fitted" if F.get("free_level") else "fixed"
         return cls(th, E_ref, exposure, feature, ins, info, time_unit, draws=draws)
 
     def members(self) -> list["LifeModel"]:
@@ -1437,7 +1493,7 @@ class _UKF:
 
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
              progress: bool = False, n_draws: int = 20, threshold: str = "auto",
-             failure_level: float | None = None, path: str = "power") -> LifeModel:
+             failure_level: float | None = None, path: str = "power", failure_at: str = "interval") -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
@@ -1445,7 +1501,8 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     for name, units in candidates.items():
         try:
             fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
-                                       threshold=threshold, failure_level=failure_level, path=path)
+                                       threshold=threshold, failure_level=failure_level, path=path,
+                                       failure_at=failure_at)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -1457,7 +1514,7 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     m = fits[best]
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
         m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
-                          threshold=m.threshold, failure_level=failure_level, path=m.path)
+                          threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at)
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
         if "path_aic" in fits[best].fit_info:
             m.fit_info["path_aic"] = fits[best].fit_info["path_aic"]
