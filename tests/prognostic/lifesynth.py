@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hd_prognostic.lifemodel import UnitEvents, UnitHistory
+from hd_prognostic import metrics as M
+from hd_prognostic.lifemodel import UnitEvents, UnitHistory, predict_history
 
 #: the shared measured data (NASA cells, Virkler): $HDPHM_MEASURED_DATA, else the shared folder next to the
 #: repository checkout (tests only; the package takes data paths as arguments)
@@ -81,3 +82,17 @@ def synth_units_observable(n: int, seed: int, truth: dict = TRUTH_OBS,
                                  events=UnitEvents(failure=float(kf))))
         eol[u] = kf
     return units, eol
+
+
+def forecast_scores(m, test, eol: dict, n_samples: int = 300) -> tuple[float, float, float]:
+    """Mean (P5-P95 coverage, in-cone fraction for lambda >= 0.5, CRPS) of ``m``'s prognosis over the new units
+    ``test`` (each forecast from its own record only, scored against its failure ``eol[unit]``)."""
+    cov, ic, crps = [], [], []
+    for u in test:
+        h = predict_history(m, UnitHistory(u.unit, u.t, u.y, u.E, u.discrete, u.E_next), n_samples=n_samples,
+                            seed=0)
+        s = M.score_history(h.rul_t, h.p50, h.p5, h.p95, eol[u.unit], samples=h.samples)
+        cov.append(s["coverage_p5_p95"])
+        ic.append(s["frac_in_cone_lambda_ge_0.5"])
+        crps.append(s["crps_mean"])
+    return float(np.mean(cov)), float(np.mean(ic)), float(np.mean(crps))

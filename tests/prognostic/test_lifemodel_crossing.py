@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from hd_prognostic import metrics as M
-from hd_prognostic.lifemodel import LifeModel, UnitEvents, UnitHistory, predict_history
+from hd_prognostic.lifemodel import LifeModel, UnitEvents, UnitHistory
+from tests.prognostic.lifesynth import forecast_scores
 
 A_F = 50.0  # failure length (the failure definition)
 
@@ -45,16 +45,6 @@ def fleet():
     return crack_units(10, seed=1), crack_units(4, seed=9)
 
 
-def _scores(m, test, eol):
-    cov, inc = [], []
-    for u in test:
-        h = predict_history(m, UnitHistory(u.unit, u.t, u.y, u.E, u.discrete, u.E_next), n_samples=300, seed=0)
-        s = M.score_history(h.rul_t, h.p50, h.p5, h.p95, eol[u.unit], samples=h.samples)
-        cov.append(s["coverage_p5_p95"])
-        inc.append(s["frac_in_cone_lambda_ge_0.5"])
-    return float(np.mean(cov)), float(np.mean(inc))
-
-
 def test_crossing_fits_the_level_a_misfit_path_reaches(fleet):
     (units, _), (test, eol) = fleet
     iv = LifeModel.fit(units, threshold="observable", path="power", failure_level=A_F, n_draws=0)
@@ -67,8 +57,8 @@ def test_crossing_fits_the_level_a_misfit_path_reaches(fleet):
     assert cr.fit_info["level"] == "fitted" and la["fitted"] < la["fixed"] - 10.0
     assert 40.0 < cr.theta["Y0"] < A_F - 1.0 and math.exp(cr.theta["log_sY"]) < 1.0
     assert "failure_level" not in cr.fit_info and cr.fit_info["failure_at"] == "crossing"
-    cov_i, inc_i = _scores(iv, test, eol)
-    cov_c, inc_c = _scores(cr, test, eol)
+    cov_i, inc_i, _ = forecast_scores(iv, test, eol)
+    cov_c, inc_c, _ = forecast_scores(cr, test, eol)
     assert cov_i > 0.95 and inc_i < 0.6  # wide and biased late
     assert inc_c > inc_i + 0.3 and 0.7 < cov_c < cov_i
     m2 = LifeModel.from_json(cr.to_json())  # the model file keeps the crossing likelihood

@@ -7,9 +7,8 @@ import math
 
 import numpy as np
 
-from hd_prognostic import metrics as M
-from hd_prognostic.lifemodel import LifeModel, UnitEvents, UnitHistory, predict_history
-from tests.prognostic.lifesynth import synth_units
+from hd_prognostic.lifemodel import LifeModel, UnitEvents, UnitHistory
+from tests.prognostic.lifesynth import forecast_scores, synth_units
 
 
 def paris_units(n: int, seed: int, a0: float = 9.0, m: float = 3.0, af: float = 40.0, every: float = 8.0,
@@ -31,16 +30,6 @@ def paris_units(n: int, seed: int, a0: float = 9.0, m: float = 3.0, af: float = 
     return units, eol
 
 
-def _scores(m, test, eol):
-    cov, crps = [], []
-    for u in test:
-        h = predict_history(m, UnitHistory(u.unit, u.t, u.y, u.E, u.discrete, u.E_next), n_samples=300, seed=0)
-        s = M.score_history(h.rul_t, h.p50, h.p5, h.p95, eol[u.unit], samples=h.samples)
-        cov.append(s["coverage_p5_p95"])
-        crps.append(s["crps_mean"])
-    return float(np.mean(cov)), float(np.mean(crps))
-
-
 def test_crack_growth_fleet_chooses_paris_and_forecasts_better():
     units, _ = paris_units(8, seed=1, every=10.0)
     test, eol = paris_units(3, seed=9, every=10.0)
@@ -49,8 +38,8 @@ def test_crack_growth_fleet_chooses_paris_and_forecasts_better():
     aic = m.fit_info["path_aic"]
     assert aic["paris"] < aic["power"] - 10.0
     pw = LifeModel.fit(units, threshold=m.threshold, path="power", n_draws=0)  # same threshold kind
-    _, crps_p = _scores(m, test, eol)
-    _, crps_w = _scores(pw, test, eol)
+    _, _, crps_p = forecast_scores(m, test, eol)
+    _, _, crps_w = forecast_scores(pw, test, eol)
     assert crps_p < 0.8 * crps_w
     m2 = LifeModel.from_json(m.to_json())  # the model file keeps the family
     assert m2.path == "paris"

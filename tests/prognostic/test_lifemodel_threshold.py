@@ -8,9 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from hd_prognostic import metrics as M
 from hd_prognostic.lifemodel import LifeModel, UnitEvents, predict_history
-from tests.prognostic.lifesynth import TRUTH_OBS, synth_units, synth_units_observable
+from tests.prognostic.lifesynth import TRUTH_OBS, forecast_scores, synth_units, synth_units_observable
 
 
 @pytest.fixture(scope="module")
@@ -24,18 +23,7 @@ def obs_fleet():
 def latent_scores(obs_fleet):
     """The latent-threshold fit of the same units, scored on the same new units (the comparison baseline)."""
     units, test, eol = obs_fleet
-    return _scores(LifeModel.fit(units, threshold="latent", n_draws=12, seed=0), test, eol)
-
-
-def _scores(m, test, eol):
-    cov, ic, crps = [], [], []
-    for u in test:
-        h = predict_history(m, type(u)(u.unit, u.t, u.y, u.E, u.discrete, u.E_next), n_samples=200, seed=0)
-        s = M.score_history(h.rul_t, h.p50, h.p5, h.p95, eol[u.unit], samples=h.samples)
-        cov.append(s["coverage_p5_p95"])
-        ic.append(s["frac_in_cone_lambda_ge_0.5"])
-        crps.append(s["crps_mean"])
-    return float(np.mean(cov)), float(np.mean(ic)), float(np.mean(crps))
+    return forecast_scores(LifeModel.fit(units, threshold="latent", n_draws=12, seed=0), test, eol, n_samples=200)
 
 
 def test_observable_threshold_is_selected_and_beats_the_latent_one(obs_fleet, latent_scores):
@@ -50,7 +38,7 @@ def test_observable_threshold_is_selected_and_beats_the_latent_one(obs_fleet, la
     r = m.to_json()["readable"]
     assert r["threshold_hi_median"] == pytest.approx(TRUTH_OBS["Y0"], abs=0.1)
     assert r["hi_noise_ar1"] == pytest.approx(TRUTH_OBS["rho"], abs=0.1)
-    c_o, i_o, p_o = _scores(m, test, eol)
+    c_o, i_o, p_o = forecast_scores(m, test, eol, n_samples=200)
     c_l, i_l, p_l = latent_scores
     assert p_o < 0.85 * p_l
     assert i_o > i_l
@@ -99,7 +87,7 @@ def test_known_failure_level_fixes_the_observable_threshold(obs_fleet, latent_sc
     cand, aic = m.fit_info["threshold_candidates"], m.fit_info["threshold_aic"]
     assert aic["observable"] == pytest.approx(2 * 8 - 2 * cand["observable"])
     assert math.exp(m.theta["log_sY"]) < 3 * TRUTH_OBS["sigma"]
-    c_o, i_o, p_o = _scores(m, test, eol)
+    c_o, i_o, p_o = forecast_scores(m, test, eol, n_samples=200)
     c_l, i_l, p_l = latent_scores
     assert 0.85 <= c_o <= 0.95 and abs(c_o - 0.9) < abs(c_l - 0.9)
     assert p_o < p_l and i_o > i_l
