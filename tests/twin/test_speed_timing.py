@@ -95,7 +95,8 @@ def _twin_tau_rmse(cfg, m, timing_entry):
     p = dataclasses.replace(ph.TwinParams.from_yaml(), **{k: float(v) for k, v in cfg["params"].items()}).with_meta(N)
     terms = [t for t in cfg["extra_terms"] if t["signal"] == "tau_m"]
     s = {"theta_m": m.theta_m, "omega_m": w, "alpha_m": alpha, "Q_red": m.Q_red, "tau_m": m.tau_m}
-    Q_res = ph.q_res(np, p, cfg["declared_effects"], m.tau_m, w, None, m.Q_red, evaluate_terms(terms, s))
+    effects = ph.equation_effects(cfg["declared_effects"], cfg["extra_terms"])  # as the twin's PINN evaluates them
+    Q_res = ph.q_res(np, p, effects, m.tau_m, w, None, m.Q_red, evaluate_terms(terms, s))
     base = cfg["discovery"]["baseline_refit"]["tau_m"]
     err = Q_res - base["J_eq"] * alpha - base["inv_eta"] * m.Q_red / N  # = tau_m - the twin's tau_m
     rows = slice(int(0.2 * m.n), None)  # discovery scores the held-out bag after its calibration part
