@@ -599,7 +599,7 @@ class _Batch:
                 Lk = _path_L(self.path, z[fl], self.lx_last[fl, None], th)
                 mf = ma * (1 - rn) + c * (Lf - rn * Lk) + rn * self.y_last[fl, None]
             vf = (1 - rn) ** 2 * va + sig * sig * (1 - rn * rn) / (1 - rho * rho)
-            if getattr(self, "crossing", False):
+            if self.crossing:
                 # the failure time is the time the measured HI reached the unit's level: density of that
                 # crossing time, p(Y_i = y(t_f)) |dy/dt| (Jacobian in log exposure; the exposure rate is data)
                 vt = sY * sY + vf
@@ -699,7 +699,7 @@ class _SubBatch(_Batch):
         m = pos[base.qu] >= 0 if len(base.qu) else np.zeros(0, bool)
         self.qi, self.qu, self.qx, self.qv = base.qi[m], pos[base.qu[m]], base.qx[m], base.qv[m]
         self.path = base.path
-        self.crossing = getattr(base, "crossing", False)
+        self.crossing = base.crossing
         if self.path != "power":  # the records of these units (z-dependent sums are per record)
             rec = pos[base.idx] >= 0
             self.idx, self.lx, self.link, self.y = pos[base.idx[rec]], base.lx[rec], base.link[rec], base.y[rec]
