@@ -111,6 +111,7 @@ class PhysicsStandInExpected:
 
     kind = "physics_standin"
     fallback_reason = ""  # why a configured twin is not the one running ("" when none was configured)
+    edge_s = 0.0  # no derivative window to fill after a reset (its causal filter is covered by the settle interval)
 
     def __init__(self, params: ph.TwinParams, effects=ph.DEFAULT_EFFECTS, fs_hz: float = 1000.0,
                  accel_cutoff_hz: float = 50.0):
@@ -183,7 +184,7 @@ class OnnxTwinExpected:
     @property
     def edge_s(self) -> float:
         """Seconds after a reset whose outputs are the twin's edge samples (``StreamingTwin.edge_s``)."""
-        return float(getattr(self.twin, "edge_s", 0.0))
+        return float(self.twin.edge_s)
 
     @property
     def fs_model(self) -> float:

@@ -85,7 +85,7 @@ class Residuals:
         """Seconds not evaluated after a model reset: ``cfg.settle_s`` (filter / LSTM transient), at least the
         running model's edge interval (``edge_s``: :attr:`hd_twin.runtime.StreamingTwin.edge_s`; 0 for the
         physics-only stand-in)."""
-        return max(float(self.cfg.settle_s), float(getattr(self.expected, "edge_s", 0.0) or 0.0))
+        return max(float(self.cfg.settle_s), float(self.expected.edge_s))
 
     def set_params(self, params: ph.TwinParams) -> None:
         """New twin parameters (the gear ratio is kept), given to both models."""
