@@ -58,7 +58,7 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
                           seed=seed, threshold=THRESHOLD[0], failure_level=level,
-                          path=PATH[0], failure_at=FAILURE_AT[0])
+                          path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
@@ -123,6 +123,7 @@ def _run_folds(fold, items):
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
 PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth shape by AIC per fit)
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
+RATE = ["median"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
 FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
 
@@ -286,6 +287,10 @@ def main(argv=None) -> int:
                          "and the records run through it, NASA and Virkler; interval otherwise, the bag fleets), or "
                          "force crossing (the density of the recorded crossing time, the level fixed or fitted by "
                          "AIC) / interval (failed between the last record and the failure time)")
+    ap.add_argument("--exposure-rate", default="median", choices=("median", "mean"),
+                    help="the prognosis's rate of a unit's future exposure per mission: median (default) or mean of "
+                         "its record's per-step rates (src/hd_prognostic/README.md, 'Dev-fleet coverage diagnosis'; "
+                         "CSV datasets with exposure = time are unchanged)")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),
                     help="Virkler only: override --failure-at (kept for older commands)")
     ap.add_argument("--workers", type=int, default=1)
@@ -297,6 +302,7 @@ def main(argv=None) -> int:
     THRESHOLD[0] = args.threshold
     PATH[0] = args.path
     FAILURE_AT[0] = args.failure_at
+    RATE[0] = args.exposure_rate
     JOBS[0] = args.jobs
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -401,7 +407,7 @@ def _louo_subset(units, eols, args, name, level=None):
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed,
                           threshold="observable" if FAILURE_AT[0] == "crossing" else THRESHOLD[0],
-                          failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0])
+                          failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)

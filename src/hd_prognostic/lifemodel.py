@@ -188,16 +188,22 @@ class UnitHistory:
     #: a level from one found at an inspection
     failure_record: tuple[float, float] | None = None
 
-    def rate(self) -> float:
-        """Mean exposure per time unit over the record (for extrapolation): the exposure accrued over the steps
-        with a known increment divided by their time. A failure many steps ahead is reached at the long-run
-        (mean) accumulation rate (renewal theory: N(E) ~ E / mean); the median of the per-step increments, the
-        earlier estimator, is below the mean where they are right-skewed (per-mission load work: by 1-12 % on
-        the dev fleet's units) and so extrapolated every failure exposure to a later time."""
+    def rate(self, estimator: str = "median") -> float:
+        """Exposure per time unit over the record (for extrapolation). ``median`` (the default): the median of
+        the per-step rates; ``mean``: the exposure accrued over the steps with a known increment divided by
+        their time, the long-run accumulation rate (renewal theory: N(E) ~ E / mean). The two differ where the
+        per-step increments are right-skewed (per-mission load work: the mean is 1-12 % above the median on the
+        dev fleet's units, so the median extrapolates a failure exposure to a later time); which one the
+        prognosis uses is :meth:`LifeModel.fit`'s ``exposure_rate`` (see ``src/hd_prognostic/README.md``,
+        "Dev-fleet coverage diagnosis")."""
         dt, dE = np.diff(self.t), np.diff(self.E)
         ok = (dt > 0) & np.isfinite(dE) & (dE >= 0)
         if ok.any():
-            return float(np.sum(dE[ok]) / np.sum(dt[ok]))
+            if estimator == "mean":
+                return float(np.sum(dE[ok]) / np.sum(dt[ok]))
+            if estimator != "median":
+                raise ValueError(f"exposure rate estimator {estimator!r} is not one of median, mean")
+            return float(np.median(dE[ok] / dt[ok]))
         if self.E_next is not None and len(self.t):
             return float(self.E_next - self.E[-1])
         return float("nan")
@@ -243,7 +249,7 @@ def attach_events(units: list[UnitHistory], events: dict[str, UnitEvents], sourc
             if gap > max(1.0, u.t[-1] - u.t[0]):  # more unrecorded life than recorded: say so, keep the event
                 notes.append(f"{source}: {u.unit}: failure at {ev.failure:g} is {gap:g} after its last "
                              f"health-indicator record ({u.t[-1]:g}); the exposure in between is extrapolated "
-                             f"at the unit's mean rate")
+                             f"at the unit's median rate")
             late = u.t >= ev.failure
             fin = np.flatnonzero(late & np.isfinite(u.y))
             u.failure_record = (float(u.t[fin[0]]), float(u.y[fin[0]])) if len(fin) else None
@@ -956,7 +962,7 @@ class LifeModel:
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
             seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
-            path: str = "power", failure_at: str = "interval") -> "LifeModel":
+            path: str = "power", failure_at: str = "interval", exposure_rate: str = "median") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -968,7 +974,8 @@ class LifeModel:
         of being estimated from the gap between the last record and the unrecorded value at failure.
         ``n_draws`` posterior draws of the population parameters
         (:func:`_posterior_draws`; 0: point estimate only) carry the parameter uncertainty of a small fleet into
-        the prognosis.
+        the prognosis. ``exposure_rate``: how the prognosis extrapolates a unit's exposure to its failure
+        exposure, ``median`` (default) or ``mean`` per-step rate of its record (:meth:`UnitHistory.rate`).
 
         ``path``: the latent path family, ``power`` (``r (E/E_ref)^b``), ``paris`` (crack-growth shape
         ``h(r E/E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1``: Paris' law with dK ~ sqrt(a) integrated, per-unit
@@ -987,6 +994,8 @@ class LifeModel:
         failure definition decides (:func:`failure_at_rule`: ``crossing`` when ``failure_level`` is given and every
         failed unit's records run through its failure, the record at the failure time being the first at or past
         the level; ``interval`` otherwise); the choice and its reason go to ``fit_info["failure_at_rule"]``."""
+        if exposure_rate not in ("median", "mean"):
+            raise ValueError(f"life-model fit: exposure_rate {exposure_rate!r} is not one of median, mean")
         rule = None
         if failure_at == "auto":  # from the failure definition (level + records), never from a score
             failure_at, rule = failure_at_rule(units, failure_level)
@@ -1228,6 +1237,8 @@ class LifeModel:
             info["failure_at"] = "crossing"
         if rule is not None:
             info["failure_at_rule"] = rule
+        if exposure_rate != "median":  # the prognosis's rate of a unit's future exposure (UnitHistory.rate)
+            info["exposure_rate"] = exposure_rate
         if level_aic is not None:
             info["level_aic"] = level_aic[fam]
             info["level"] = "fitted" if F.get("free_level") else "fixed"
@@ -1289,7 +1300,7 @@ class LifeModel:
         """RUL in the unit's time axis for posterior samples ``z`` at time ``t_k`` (alive at ``t_k``);
         ``h``: ``u.truncated(t_k)`` when the caller has it already."""
         h = u.truncated(t_k) if h is None else h
-        rate = h.rate()
+        rate = h.rate(self.fit_info.get("exposure_rate", "median"))
         if not (np.isfinite(rate) and rate > 0):
             rate = float(self.fit_info.get("rate_median", 1.0))
         if self.threshold == "observable":
