@@ -11,7 +11,10 @@ have; NASA / Virkler: the exponential-fade / Paris-law particle filters of ``rea
 
 Datasets (each optional): simulated fleets (``--fleet NAME=DIR``, their ``fleet_truth.json`` gives the
 failure missions, written as an events file: what an operator records), NASA cells (``--nasa DIR``, failure =
-capacity <= 80 % of rated; 70 % leaves 1 failure in some training folds), Virkler (``--virkler DIR``).
+capacity <= 80 % of rated; 70 % leaves 1 failure in some training folds), Virkler (``--virkler DIR``). The
+failure-time likelihood follows each dataset's failure definition (``--failure-at auto``,
+``lifemodel.failure_at_rule``): a recorded crossing of a known level for NASA (1.6 Ah) and Virkler (49.8 mm),
+found-failed intervals for the bag fleets.
 The degradation clock of the simulated fleets is chosen by maximum likelihood on the fleet named by
 ``--dev`` (all its units) and then fixed for every other fleet: no choice is made on the scored units.
 
