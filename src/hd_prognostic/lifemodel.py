@@ -190,20 +190,19 @@ class UnitHistory:
 
     def rate(self, estimator: str = "median") -> float:
         """Exposure per time unit over the record (for extrapolation). ``median`` (the default): the median of
-        the per-step rates; ``mean``: the exposure accrued over the steps with a known increment divided by
-        their time, the long-run accumulation rate (renewal theory: N(E) ~ E / mean). The two differ where the
-        per-step increments are right-skewed (per-mission load work: the mean is 4.7 % above the median on
-        average over the dev fleet's units, -1.4 to +11.7 %, so the median extrapolates a failure exposure to a later
-        time); which one the
-        prognosis uses is :meth:`LifeModel.fit`'s ``exposure_rate`` (see ``src/hd_prognostic/README.md``,
-        "Dev-fleet coverage diagnosis")."""
+        the per-step rates; ``mean``: the exposure accrued over the steps with a known increment divided by their
+        time, the long-run accumulation rate (renewal theory: N(E) ~ E / mean). They differ where the per-step
+        increments are right-skewed (per-mission load work: the mean is 4.7 % above the median on average over the
+        dev fleet's units, -1.4 to +11.7 %, so the median extrapolates a failure exposure to a later time). The
+        prognosis uses :meth:`LifeModel.fit`'s ``exposure_rate`` (``src/hd_prognostic/README.md``, "Dev-fleet
+        coverage diagnosis")."""
+        if estimator not in ("median", "mean"):
+            raise ValueError(f"exposure rate estimator {estimator!r} is not one of median, mean")
         dt, dE = np.diff(self.t), np.diff(self.E)
         ok = (dt > 0) & np.isfinite(dE) & (dE >= 0)
         if ok.any():
             if estimator == "mean":
                 return float(np.sum(dE[ok]) / np.sum(dt[ok]))
-            if estimator != "median":
-                raise ValueError(f"exposure rate estimator {estimator!r} is not one of median, mean")
             return float(np.median(dE[ok] / dt[ok]))
         if self.E_next is not None and len(self.t):
             return float(self.E_next - self.E[-1])
