@@ -188,7 +188,13 @@ class OnboardCore:
             self.residuals.rate_known(self.guard.fs, None, self.guard.note)
 
     def end_mission(self) -> None:
-        """End of the mission (batch / a new /hd/mission): notes what could not be evaluated."""
+        """End of the mission (batch / a new /hd/mission): the rows a fixed-lag twin still holds (:meth:`drain`,
+        into :meth:`take_rows` / :meth:`take_events` / :meth:`take_windows`); notes what could not be evaluated."""
+        r = self.drain()
+        for row in r.table:
+            self.rows.append(row)
+        self.events.extend(r.events)
+        self.windows.extend(r.windows)
         self.guard.end_mission(self.warmup.done)
 
     def push_temperature(self, stamp_ns: int, value: float) -> None:
@@ -223,16 +229,35 @@ class OnboardCore:
             if msg is not None:
                 self.residuals.twist_reference_problem(g.fs, msg, g.note)
         c = g.condition(stamps_ns, V)  # 2. gaps, NaN, held twin inputs
-        r = self.residuals.block(c.t, V, c.Vh, c.valid, c.reset_at)  # 3. expected response, residuals
+        r = self.residuals.block(c.t, V, c.Vh, c.valid, c.reset_at, stamps_ns)  # 3. expected response, residuals
         g.health.n_resets += r.n_resets
-        r_tw = self._warmup_block(c.t, V, r)  # 4. warm-up: twist zero, references, self-calibration
+        g.last_ns = int(stamps_ns[-1])
+        if r.t is None:  # the block's own rows (no fixed-lag twin)
+            r = r._replace(t=c.t, stamps=stamps_ns, V=V)
+        return self._after_residuals(r)
+
+    def _after_residuals(self, r: BlockResiduals) -> PushResult:
+        """Warm-up, detection, table and windows of the rows the residuals ``r`` belong to (``r.t``, ``r.stamps``,
+        ``r.V``: a fixed-lag twin's rows come ``lag_samples`` late)."""
+        t, stamps_ns, V = r.t, r.stamps, r.V
+        if len(t) == 0:
+            return PushResult(np.empty((0, len(RESIDUAL_COLUMNS))), self.level)
+        r_tw = self._warmup_block(t, V, r)  # 4. warm-up: twist zero, references, self-calibration
         es, lev, stiff, fric, events = self.detection.block(  # 5. detectors, monitors, level
-            c.t, stamps_ns, r.r_Q, r_tw, r.twist_raw, r.Q_for_twist, V[:, 2], r.evaluate)
+            t, stamps_ns, r.r_Q, r_tw, r.twist_raw, r.Q_for_twist, V[:, 2], r.evaluate)
         table = np.column_stack([stamps_ns * 1e-9, r.Q_meas, r.Q_hat, r.r_Q, es["Q_red"], r_tw, es["twist"],
                                  lev.astype(float), stiff, fric])
-        g.last_ns = int(stamps_ns[-1])
-        windows = self.win.block(c.t, table, V, self._close_window)  # 6. windows
+        windows = self.win.block(t, table, V, self._close_window)  # 6. windows
         return PushResult(table, self.level, events, windows)
+
+    def drain(self) -> PushResult:
+        """End of the mission with a fixed-lag twin: the rows it still holds (the segment's last ``lag_samples``,
+        not evaluated: the batch twin's edge samples) go through warm-up, detection and windows; empty otherwise.
+        :meth:`end_mission` calls it (its rows, events and windows then wait in :meth:`take_rows` etc.)."""
+        r = self.residuals.drain()
+        if r is None:
+            return PushResult(np.empty((0, len(RESIDUAL_COLUMNS))), self.level)
+        return self._after_residuals(r)
 
     def _warmup_block(self, t: np.ndarray, V: np.ndarray, r: BlockResiduals) -> np.ndarray:
         """Warm-up collection and, at its end, what it taught; the twist channel relative to its zero."""
@@ -296,7 +321,7 @@ class OnboardCore:
                 or (stamp_ns - last) * 1e-9 * fs > 1.5
                 or ((wu.twist_zero is None or not det.calibrated)
                     and (stamp_ns - g.t0_ns) * 1e-9 >= cfg.warmup_s)  # end of warm-up: block path
-                or not hasattr(res.expected, "step_one")):
+                or not hasattr(res.expected, "step_one") or res.delayed):  # a fixed-lag twin: its rows wait
             r = self.push(np.array([stamp_ns], np.int64), np.array([v], np.float64))
             if len(r.table):
                 self.rows.append(r.table[0])

@@ -107,6 +107,16 @@ class StreamingTwin:
     def inputs(self) -> tuple[str, ...]:
         return tuple(self.config["inputs"])
 
+    def set_mode(self, mode: str) -> None:
+        """Switch between ``"causal"`` and ``"fixed_lag"`` (then reset at the same rate)."""
+        if mode not in MODES:
+            raise ValueError(f"StreamingTwin: mode must be one of {MODES}, got {mode!r}")
+        if mode != "causal" and self.legacy_physics:
+            raise ValueError("StreamingTwin: legacy_physics is the causal reference only")
+        self.mode = mode
+        self._edge_n = self._edge_half if mode == "fixed_lag" else 2 * self._edge_half
+        self.reset(self.fs_in)
+
     def reset(self, fs_in: float | None = None, gear_ratio: float | None = None) -> None:
         """Zero the LSTM and filter states; optionally set the input rate [Hz] and N. In ``fixed_lag`` mode the
         samples not given out yet are dropped (:meth:`flush` first to have them)."""

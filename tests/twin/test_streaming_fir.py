@@ -195,3 +195,52 @@ def test_run_mission_flushes_each_segment_in_fixed_lag_mode(model, mission):
     assert np.array_equal(fl["index"], np.arange(0, mission.n, 2))
     with pytest.raises(ValueError, match="mode must be one of"):
         StreamingTwin(model, mode="centred")
+
+
+# ---- the onboard core on the fixed-lag twin ------------------------------------------------------
+def _core(model, m, fixed_lag):
+    from hd_onboard.config import OnboardConfig
+    from hd_onboard.core import OnboardCore
+    from hd_onboard.expected import make_expected
+    from hd_twin import physics as ph
+
+    p = ph.TwinParams.from_yaml().with_meta(gear_ratio=m.meta.gear_ratio)
+    cfg = OnboardConfig(twin_fixed_lag=fixed_lag, nominal_fs=m.fs)  # rate known: no restart once it is measured
+    return OnboardCore(make_expected(str(model), p, fs_hz=m.fs), p, config=cfg)
+
+
+def test_onboard_core_pairs_each_measurement_with_its_fixed_lag_twin_output(model, mission):
+    """Residual k = measurement k - the (batch-equal) twin output k, whatever the block size; the flag decision
+    of sample k is made lag_samples later; every sample gets its row, in stamp order."""
+    from hd_onboard.batch import run_mission
+    from hd_onboard.core import OnboardCore  # noqa: F401
+    from hd_twin.runtime import StreamingTwin
+
+    m = mission
+    m.t_cmd, m.theta_ref = np.zeros(0), np.zeros(0)  # no commands: the twin input does not depend on block starts
+    stamps = m.t0_ns + np.round(m.t * 1e9).astype(np.int64)
+    tables = {}
+    for block in (1000, 7, 1):
+        core = _core(model, m, True)
+        assert core.residuals.delayed and core.residuals.lag_samples > 0
+        tables[block] = run_mission(m, core, block=block)["table"]
+        assert np.array_equal(np.round(tables[block][:, 0] * 1e9).astype(np.int64), stamps)  # every row, in order
+    for block in (7, 1):  # block path and the per-sample path (push_one hands a fixed-lag twin to push)
+        np.testing.assert_allclose(tables[block][:, 1:4], tables[1000][:, 1:4], rtol=1e-9, atol=1e-9, equal_nan=True)
+    tab = tables[1000]
+    # the twin's own fixed-lag output on the core's inputs (temperature held, no command), held between model samples
+    X = D.mission_inputs(m)
+    X[:, 5] = 25.0
+    X[:, 6] = np.nan
+    tw = StreamingTwin(model, fs_in=m.fs, mode="fixed_lag")
+    q = np.concatenate([tw.step(X)["Q_red"], tw.flush()["Q_red"]])
+    np.testing.assert_allclose(tab[:, 2], np.repeat(q, 2)[:m.n], rtol=0, atol=1e-9 * np.abs(q).max())
+    ev = np.isfinite(tab[:, 3])
+    assert ev.sum() > 0.8 * m.n
+    np.testing.assert_allclose(tab[ev, 3], (m.Q_red - tab[:, 2])[ev], rtol=1e-12, atol=1e-9)  # residual k: Q_red k - Q_hat k
+    assert not ev[-tw.lag_samples:].any()  # the mission's last samples (the batch edge) are not evaluated
+    # the causal setting keeps the former twin
+    causal = run_mission(m, _core(model, m, False), block=1000)["table"]
+    c = StreamingTwin(model, fs_in=m.fs)
+    qc = np.concatenate([c.step(X[i:i + 1000])["Q_red"] for i in range(0, m.n, 1000)])
+    np.testing.assert_allclose(causal[:, 2], np.repeat(qc, 2)[:m.n], rtol=0, atol=1e-9 * np.abs(qc).max())
