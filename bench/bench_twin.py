@@ -310,7 +310,28 @@ def streaming(argv: list[str]) -> int:
     for _ in range(7):  # interleaved rounds: a load change hits every variant alike
         for name, kind, f in cases:
             rounds[(name, kind)].append(_median_time(f, 1))
+    # the physics path alone, one model-rate row per call (what the FIR replaced), before / after
+    rows = X[:200]
+
+    def path_legacy():
+        legacy.reset(fs_model)
+        for i in range(200):
+            legacy._phys_legacy(rows[i:i + 1])
+
+    def path_fir():
+        tw.reset(fs_model)
+        for i in range(200):
+            tw._phys_causal(rows[i:i + 1])
+
+    for name, f in (("path before", path_legacy), ("path after", path_fir)):
+        rounds[(name, "one")] = []
+    for _ in range(7):
+        for name, f in (("path before", path_legacy), ("path after", path_fir)):
+            rounds[(name, "one")].append(_median_time(f, 1))
     med = {k: statistics.median(v) for k, v in rounds.items()}
+    pb, pa = med[("path before", "one")], med[("path after", "one")]
+    print(f"  physics path alone, one row per call: before {pb / 200 * 1e6:.1f} us, after (FIR) {pa / 200 * 1e6:.1f} us"
+          f"   speed-up x{pb / pa:.1f}")
     print(f"streaming twin with its physics path ({'active' if tw.physpath.active else 'none'}; fixed-lag latency "
           f"{lagged.lag_samples} samples = {lagged.lag_s * 1e3:.1f} ms), median of 7 interleaved rounds, 1 thread:")
     for kind, n in (("one", 200), ("block", 2000)):

@@ -286,21 +286,20 @@ class StreamingTwin:
         network's inputs are mean-filled instead)."""
         Xd = Xd.copy()
         Xd[:, 5] = np.where(np.isfinite(Xd[:, 5]), Xd[:, 5], float(self.params["T_ref"]))
-        for j in range(Xd.shape[1]):
-            bad = ~np.isfinite(Xd[:, j])
-            if bad.any():
-                last = self._phys_last[j] if self._phys_last is not None else 0.0
-                pos = np.maximum.accumulate(np.where(~bad, np.arange(len(Xd)), -1))
-                Xd[:, j] = np.where(pos >= 0, Xd[np.maximum(pos, 0), j], last)
+        fin = np.isfinite(Xd)
+        for j in np.flatnonzero(~fin.all(axis=0)):
+            last = self._phys_last[j] if self._phys_last is not None else 0.0
+            pos = np.maximum.accumulate(np.where(fin[:, j], np.arange(len(Xd)), -1))
+            Xd[:, j] = np.where(pos >= 0, Xd[np.maximum(pos, 0), j], last)
         if len(Xd):
             self._phys_last = Xd[-1].copy()
         return Xd
 
     def _q_phys(self, Xh: np.ndarray, alpha: np.ndarray | None) -> np.ndarray:
-        """The identified balance on held model-rate rows with their derivative ``alpha`` (None: not needed)."""
-        from .physpath import signals_from_X  # noqa: PLC0415
-
-        sig = signals_from_X(Xh, self.decimation / self.fs_in)
+        """The identified balance on held model-rate rows with their derivative ``alpha`` (None: not needed);
+        the balance's columns are pointwise in (omega_m, tau_m, alpha_m), so only those signals are passed."""
+        sig = {"t": np.zeros(len(Xh)), "theta_m": Xh[:, 0], "omega_m": Xh[:, 1], "tau_m": Xh[:, 2],
+               "theta_f": Xh[:, 3], "omega_f": Xh[:, 4], "temperature": Xh[:, 5]}
         if alpha is not None:
             sig["alpha_m"] = alpha
         return self.physpath.predict_signals(sig)

@@ -99,6 +99,11 @@ class CausalSGHistory:
             return np.zeros(0)
         wt = self.wt
         w, m = wt.w, wt.m
+        if b == 1 and self.n >= w:  # the steady one-sample call: the last end-of-window row, one dot product
+            H = np.concatenate([self.hist[1:], x])
+            self.hist = H
+            self.n += 1
+            return np.array([wt.right[-1] @ H])
         H = np.concatenate([self.hist, x]) if len(self.hist) else x
         L = len(H)
         first = L - b  # position of the first new sample in H
