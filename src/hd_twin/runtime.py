@@ -86,6 +86,8 @@ class StreamingTwin:
         self.fs_model = float(self.config["preprocessing"]["fs_model"])
         sc = self.config["output_scales"]
         self._scales = [tuple(sc[k]) for k in self.config["outputs"]]
+        self._out_mean = np.array([m for m, _ in self._scales], float)
+        self._out_scale = np.array([s for _, s in self._scales], float)
         from .physpath import PhysicsPath  # noqa: PLC0415
 
         pp = self.config.get("physics_path")
@@ -245,7 +247,7 @@ class StreamingTwin:
             Z = self.norm.norm_features(F).astype(np.float32)[None]
             y, self.h, self.c = self.session.run(None, {"x": Z, "h0": self.h, "c0": self.c})
             y = y[0].astype(np.float64)
-            si = np.column_stack([m + s * y[:, j] for j, (m, s) in enumerate(self._scales)])
+            si = self._out_mean + self._out_scale * y
         else:
             si = np.zeros((0, len(self._scales)))
         if self.mode == "fixed_lag" and self._needs_alpha:
