@@ -321,18 +321,30 @@ class OnboardCore:
                 or (stamp_ns - last) * 1e-9 * fs > 1.5
                 or ((wu.twist_zero is None or not det.calibrated)
                     and (stamp_ns - g.t0_ns) * 1e-9 >= cfg.warmup_s)  # end of warm-up: block path
-                or not hasattr(res.expected, "step_one") or res.delayed):  # a fixed-lag twin: its rows wait
+                or not hasattr(res.expected, "step_one") or (res.delayed and res.irregular)):
             r = self.push(np.array([stamp_ns], np.int64), np.array([v], np.float64))
-            if len(r.table):
-                self.rows.append(r.table[0])
+            for row in r.table:  # a fixed-lag twin may give several rows (or none) for one sample
+                self.rows.append(row)
             self.events.extend(r.events)
             self.windows.extend(r.windows)
             return self.level
         g.health.n_samples += 1
         t = (stamp_ns - g.t0_ns) * 1e-9
-        Q_hat, r_Q, Qt, tw_raw, twist = res.one(t, tm, tf, wm, wf, tau, Q)
         h = g.hold
         h[0], h[1], h[2], h[3], h[4], h[5] = tm, tf, wm, wf, tau, Q
+        g.last_ns = stamp_ns
+        if res.delayed:  # a fixed-lag twin: the rows whose output came with this sample (usually the one lag back)
+            lev = self.level
+            for tk, sk, vk, out in res.one_delayed(t, stamp_ns, v):
+                lev = self._one_row(tk, sk, vk, *out)
+            return lev
+        return self._one_row(t, stamp_ns, h, *res.one(t, tm, tf, wm, wf, tau, Q))
+
+    def _one_row(self, t: float, stamp_ns: int, v, Q_hat: float, r_Q: float, Qt: float, tw_raw: float,
+                 twist: float) -> int:
+        """Warm-up, detection, row and window of one sample whose residuals are known (the short path)."""
+        wu, det, cfg = self.warmup, self.detection, self.cfg
+        tm, tf, wm, wf, tau, Q = v
         if wu.twist_zero is None:  # warm-up (t < warmup_s here)
             wu.one(t, tm, tf, wm, wf, tau, Q, tw_raw, Qt, r_Q, twist)
             r_tw = math.nan
@@ -343,8 +355,7 @@ class OnboardCore:
         lev, e_Q, e_tw, stiff, fric = det.one(t, stamp_ns, r_Q, r_tw, tw_raw, Qt, wm, self.events)
         row = (stamp_ns * 1e-9, Q, Q_hat, r_Q, e_Q, r_tw, e_tw, float(lev), stiff, fric)
         self.rows.append(row)
-        g.last_ns = stamp_ns
-        w = self.win.one(t, row, h, self._close_window)
+        w = self.win.one(t, row, v, self._close_window)
         if w is not None:
             self.windows.append(w)
         return lev

@@ -290,6 +290,40 @@ class Residuals:
             r_Q = twist = tw_raw = math.nan
         return Q_hat, r_Q, Qt, tw_raw, twist
 
+    @property
+    def irregular(self) -> bool:
+        """Outputs of a replaced / reset model still wait to be given out (the block path handles those)."""
+        return self._carry is not None
+
+    def one_delayed(self, t: float, stamp_ns: int, v):
+        """One valid sample inside a segment for a fixed-lag twin (the short path): the sample waits, the twin
+        steps, and the rows whose output came are returned, oldest first, as ``(t, stamp_ns, values,
+        (Q_hat, r_Q, Q_for_twist, twist_raw, twist))``; same arithmetic as :meth:`block`."""
+        tm, tf, wm, wf, tau, Q = v
+        x = self._x1
+        x[0], x[1], x[2], x[3], x[4] = tm, wm, tau, tf, wf
+        x[I_TEMP] = self.temperature
+        x[I_REF] = self.theta_ref
+        self._enqueue(np.array([t]), np.array([stamp_ns], np.int64), np.array([v], float),
+                      np.array([t >= self.settle_until]))
+        q = self.expected.step(np.array([t]), x[None, :])
+        if len(q) == 0:
+            return []
+        tq, sq, Vq, okq = self._dequeue(len(q))
+        p = self.params
+        out = []
+        for i in range(len(q)):
+            tm, tf, wm, wf, tau, Q = Vq[i].tolist()
+            Q_hat = float(q[i])
+            r_Q = Q - Q_hat
+            Qt = Q if Q == Q else Q_hat
+            tw_raw = tf - tm / p.N
+            twist = tw_raw - Qt / p.K_out
+            if not okq[i]:
+                r_Q = twist = tw_raw = math.nan
+            out.append((float(tq[i]), int(sq[i]), (tm, tf, wm, wf, tau, Q), (Q_hat, r_Q, Qt, tw_raw, twist)))
+        return out
+
     def _reset_segment(self, t_s: float) -> None:
         self.expected.reset()
         self.settle_until = t_s + self.settle_s

@@ -225,8 +225,21 @@ def test_onboard_core_pairs_each_measurement_with_its_fixed_lag_twin_output(mode
         assert core.residuals.delayed and core.residuals.lag_samples > 0
         tables[block] = run_mission(m, core, block=block)["table"]
         assert np.array_equal(np.round(tables[block][:, 0] * 1e9).astype(np.int64), stamps)  # every row, in order
-    for block in (7, 1):  # block path and the per-sample path (push_one hands a fixed-lag twin to push)
-        np.testing.assert_allclose(tables[block][:, 1:4], tables[1000][:, 1:4], rtol=1e-9, atol=1e-9, equal_nan=True)
+    # the per-sample short path (push_one: each sample's row waits, the row lag back is processed)
+    core = _core(model, m, True)
+    (tt, vv), = m.temperatures.values()
+    core.push_temperature(int(m.t0_ns + tt[0] * 1e9), float(vv[0]))
+    V = np.column_stack([m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red])
+    block_calls, push = [], core.push
+    core.push = lambda *a: block_calls.append(1) or push(*a)
+    for s, v in zip(stamps.tolist(), V.tolist()):
+        core.push_one(s, v)
+    core.end_mission()
+    assert len(block_calls) < 0.05 * m.n  # the first samples only (rate, twist check): then the scalar short path
+    tables["one"] = core.take_rows()
+    for block in (7, 1, "one"):
+        assert len(tables[block]) == m.n
+        np.testing.assert_allclose(tables[block], tables[1000], rtol=1e-9, atol=1e-9, equal_nan=True)
     tab = tables[1000]
     # the twin's own fixed-lag output on the core's inputs (temperature held, no command), held between model samples
     X = D.mission_inputs(m)
