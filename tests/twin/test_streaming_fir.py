@@ -13,6 +13,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 from scipy.signal import savgol_filter
@@ -216,8 +218,9 @@ def test_onboard_core_pairs_each_measurement_with_its_fixed_lag_twin_output(mode
     from hd_onboard.core import OnboardCore  # noqa: F401
     from hd_twin.runtime import StreamingTwin
 
-    m = mission
+    m = copy.deepcopy(mission)
     m.t_cmd, m.theta_ref = np.zeros(0), np.zeros(0)  # no commands: the twin input does not depend on block starts
+    m.tau_m[300:303] = np.nan  # invalid samples (held for the twin, not evaluated)
     stamps = m.t0_ns + np.round(m.t * 1e9).astype(np.int64)
     tables = {}
     for block in (1000, 7, 1):
@@ -245,6 +248,7 @@ def test_onboard_core_pairs_each_measurement_with_its_fixed_lag_twin_output(mode
     X = D.mission_inputs(m)
     X[:, 5] = 25.0
     X[:, 6] = np.nan
+    X[300:303, 2] = X[299, 2]  # the core holds the last finite input
     tw = StreamingTwin(model, fs_in=m.fs, mode="fixed_lag")
     q = np.concatenate([tw.step(X)["Q_red"], tw.flush()["Q_red"]])
     np.testing.assert_allclose(tab[:, 2], np.repeat(q, 2)[:m.n], rtol=0, atol=1e-9 * np.abs(q).max())
@@ -257,3 +261,27 @@ def test_onboard_core_pairs_each_measurement_with_its_fixed_lag_twin_output(mode
     c = StreamingTwin(model, fs_in=m.fs)
     qc = np.concatenate([c.step(X[i:i + 1000])["Q_red"] for i in range(0, m.n, 1000)])
     np.testing.assert_allclose(causal[:, 2], np.repeat(qc, 2)[:m.n], rtol=0, atol=1e-9 * np.abs(qc).max())
+
+
+def test_onboard_fixed_lag_twin_across_a_dropout(model, mission):
+    """A dropout resets the twin: the segment's last rows come out (not evaluated, as the batch edge samples),
+    every accepted sample gets its row, and the short path equals the block path."""
+    m = mission
+    stamps = m.t0_ns + np.round(m.t * 1e9).astype(np.int64)
+    V = np.column_stack([m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red])
+    keep = np.r_[0:350, 380:m.n]  # 30 samples missing (> max_gap_samples): a new segment
+    s, V = stamps[keep], V[keep]
+    a = _core(model, m, True)
+    A = [a.push(s[i:i + 64], V[i:i + 64]).table for i in range(0, len(s), 64)]
+    A.append(a.drain().table)
+    A = np.concatenate(A)
+    b = _core(model, m, True)
+    for s_, v_ in zip(s.tolist(), V.tolist()):
+        b.push_one(s_, v_)
+    b.end_mission()
+    B = b.take_rows()
+    assert len(A) == len(B) == len(s) and np.array_equal(A[:, 0], s * 1e-9)
+    np.testing.assert_allclose(B, A, rtol=1e-9, atol=1e-9, equal_nan=True)
+    lag = a.residuals.lag_samples
+    assert a.health.n_resets >= 1
+    assert not np.isfinite(A[350 - lag + 1:350, 3]).any() and np.isfinite(A[330:350 - lag, 3]).all()  # last rows: not evaluated
