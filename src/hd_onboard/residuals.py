@@ -230,6 +230,7 @@ class Residuals:
         n = len(self._queue[0])
         q = np.concatenate([q, np.full(n - len(q), np.nan)])  # rows no model answers for (model switched)
         tq, sq, Vq, okq = self._dequeue(n)
+        self._reset_segment(float(tq[-1]))  # a sample pushed after this starts a new segment
         return self._residuals(q, Vq, np.zeros(n, bool), 0)._replace(t=tq, stamps=sq, V=Vq)
 
     def _hold_back(self) -> None:
