@@ -321,7 +321,7 @@ class OnboardCore:
                 or (stamp_ns - last) * 1e-9 * fs > 1.5
                 or ((wu.twist_zero is None or not det.calibrated)
                     and (stamp_ns - g.t0_ns) * 1e-9 >= cfg.warmup_s)  # end of warm-up: block path
-                or not hasattr(res.expected, "step_one") or (res.delayed and res.irregular)):
+                or not hasattr(res.expected, "step_one") or res.irregular):  # rows of a replaced twin wait
             r = self.push(np.array([stamp_ns], np.int64), np.array([v], np.float64))
             for row in r.table:  # a fixed-lag twin may give several rows (or none) for one sample
                 self.rows.append(row)
