@@ -126,7 +126,7 @@ def _run_folds(fold, items):
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
 PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth shape by AIC per fit)
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
-RATE = ["median"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
+RATE = ["mean"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
 FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
 
@@ -290,8 +290,8 @@ def main(argv=None) -> int:
                          "and the records run through it, NASA and Virkler; interval otherwise, the bag fleets), or "
                          "force crossing (the density of the recorded crossing time, the level fixed or fitted by "
                          "AIC) / interval (failed between the last record and the failure time)")
-    ap.add_argument("--exposure-rate", default="median", choices=("median", "mean"),
-                    help="the prognosis's rate of a unit's future exposure per mission: median (default) or mean of "
+    ap.add_argument("--exposure-rate", default="mean", choices=("median", "mean"),
+                    help="the prognosis's rate of a unit's future exposure per mission: mean (default) or median of "
                          "its record's per-step rates (src/hd_prognostic/README.md, 'Dev-fleet coverage diagnosis'; "
                          "CSV datasets with exposure = time are unchanged)")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),

@@ -962,7 +962,7 @@ class LifeModel:
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
             seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
-            path: str = "power", failure_at: str = "interval", exposure_rate: str = "median") -> "LifeModel":
+            path: str = "power", failure_at: str = "interval", exposure_rate: str = "mean") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -975,7 +975,8 @@ class LifeModel:
         ``n_draws`` posterior draws of the population parameters
         (:func:`_posterior_draws`; 0: point estimate only) carry the parameter uncertainty of a small fleet into
         the prognosis. ``exposure_rate``: how the prognosis extrapolates a unit's exposure to its failure
-        exposure, ``median`` (default) or ``mean`` per-step rate of its record (:meth:`UnitHistory.rate`).
+        exposure, ``mean`` (default: cumulative exposure grows at the mean rate) or ``median`` (the default
+        before, kept for models saved without the key) per-step rate of its record (:meth:`UnitHistory.rate`).
 
         ``path``: the latent path family, ``power`` (``r (E/E_ref)^b``), ``paris`` (crack-growth shape
         ``h(r E/E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1``: Paris' law with dK ~ sqrt(a) integrated, per-unit
@@ -1237,8 +1238,9 @@ class LifeModel:
             info["failure_at"] = "crossing"
         if rule is not None:
             info["failure_at_rule"] = rule
-        if exposure_rate != "median":  # the prognosis's rate of a unit's future exposure (UnitHistory.rate)
-            info["exposure_rate"] = exposure_rate
+        # the prognosis's rate of a unit's future exposure (UnitHistory.rate); a model saved without it (before
+        # the mean became the default) keeps the median it was scored with
+        info["exposure_rate"] = exposure_rate
         if level_aic is not None:
             info["level_aic"] = level_aic[fam]
             info["level"] = "fitted" if F.get("free_level") else "fixed"

@@ -1,9 +1,10 @@
-"""How the prognosis extrapolates a unit's exposure: the median (default) or the mean per-step rate of its record
+"""How the prognosis extrapolates a unit's exposure: the mean (default) or the median per-step rate of its record
 (``UnitHistory.rate``, ``LifeModel.fit(exposure_rate=...)``, bench ``--exposure-rate``). Right-skewed per-mission
 exposure (load work) puts the median below the mean; the failure exposure is then reached later with the median."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -29,11 +30,15 @@ def test_rate_estimators_on_skewed_increments():
 
 def test_fit_keeps_the_estimator_and_the_prognosis_uses_it():
     units, _ = synth_units(8, seed=3, censor_frac=0.0)
-    m = LifeModel.fit(units, n_draws=0, maxiter=100)
-    assert "exposure_rate" not in m.fit_info  # default: the median, model files as before
-    mm = LifeModel.fit(units, n_draws=0, maxiter=100, exposure_rate="mean")
+    m = LifeModel.fit(units, n_draws=0, maxiter=100, exposure_rate="median")
+    assert m.fit_info["exposure_rate"] == "median"
+    mm = LifeModel.fit(units, n_draws=0, maxiter=100)  # default: the mean
     assert mm.fit_info["exposure_rate"] == "mean" and mm.theta == m.theta  # the fit itself is the same
     assert LifeModel.from_json(mm.to_json()).fit_info["exposure_rate"] == "mean"
+    # a model saved before the key existed keeps the median it was scored with
+    d = json.loads(json.dumps(mm.to_json()))
+    del d["fit_info"]["exposure_rate"]
+    old = LifeModel.from_json(d)
     with pytest.raises(ValueError, match="exposure_rate"):
         LifeModel.fit(units, n_draws=0, exposure_rate="mode")
     # a unit flying right-skewed missions: two big missions among small ones (mean 1.5x the median)
@@ -45,6 +50,7 @@ def test_fit_keeps_the_estimator_and_the_prognosis_uses_it():
     z = np.zeros(400)
     r_med = m.rul_samples(z, u, 20.0, np.random.default_rng(2))
     r_mean = mm.rul_samples(z, u, 20.0, np.random.default_rng(2))
+    assert np.array_equal(old.rul_samples(z, u, 20.0, np.random.default_rng(2)), r_med)
     ratio = (np.median(r_mean) - 1.0) / (np.median(r_med) - 1.0)  # steps after the known next one
     assert ratio == pytest.approx(u.rate("median") / u.rate("mean"), rel=0.05)
     assert u.rate("mean") / u.rate("median") == pytest.approx(1.5)
