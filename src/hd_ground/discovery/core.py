@@ -222,6 +222,13 @@ def baseline_columns(target: str, avail: set[str], declared: list[str], extra_te
         # Q_red = K (theta_m/N - theta_f) + c (omega_m/N - omega_f): positive stiffness and damping
         cols.append(BaselineColumn("K", None, {"op": "var", "var": "windup"}))
         cols.append(BaselineColumn("c", None, {"op": "var", "var": "windup_dot"}))
+        if "alpha_f" in avail:
+            # the sensor does not sit at the spring: the inertia between the measured twist and the output torque
+            # sensor takes J_out theta_f'' (PHYSICS.md r4: F_m r_m - Q_red - J_CS theta_f'' = 0; a compliance chain
+            # with inertia inside it adds to it), so Q_red = K w + c w' - J_out alpha_f. Without it the inertia
+            # torque at the profile's hard reversals (one end of the theta_f range) was "found" on clean data as
+            # a cubic in theta_f (docs/DISCOVERY_PASSES.md, seventh pass)
+            cols.append(BaselineColumn("minus_J_out", None, {"op": "var", "var": "alpha_f"}))
         known = {}
     else:
         raise DiscoveryError(f"unknown target signal {target!r}; one of tau_m, Q_red")

@@ -223,6 +223,9 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
         s["alpha_m_dot"] = _derivative(s["alpha_m"], m.t, seg, aw_s)
     if np.any(np.isfinite(s["Q_red"])):
         s["Q_red_over_N"] = s["Q_red"] / N
+    # the output's acceleration through the gear (the twist's own acceleration is negligible against it):
+    # the Q_red baseline's inertia column (the flange between the twist and the torque sensor, PHYSICS.md r4)
+    s["alpha_f"] = s["alpha_m"] / N
     s["phi"] = s["theta_f"] - s["theta_m"] / N  # output-side twist (hd_twin.physics convention), rad
     s["phi_dot"] = s["omega_f"] - s["omega_m"] / N
     # wind-up: input leading the output; the transmitted torque is + K windup (PHYSICS.md 1.2:

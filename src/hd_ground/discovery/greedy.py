@@ -85,7 +85,8 @@ def greedy_discover(ds: Dataset, target: str, heldout: np.ndarray, *, min_gain: 
         _, eps, Xb = best
     else:
         eps = float(np.quantile(np.abs(w[fit]), 0.9)) * 1e-2
-        Xb = np.stack([sig["windup"], sig["windup_dot"]], 1)
+        # the same Q_red baseline discover fits: stiffness, damping and the output inertia (core.baseline_columns)
+        Xb = np.stack([sig["windup"], sig["windup_dot"]] + ([sig["alpha_f"]] if "alpha_f" in avail else []), 1)
 
     def ho_sse(X):
         b = _lstsq(X[fit], y[fit])
