@@ -1302,5 +1302,7 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
         d2.alpha_window = {"window_s": float(win), "timing": bool(timing)}
         return d2, (f"acceleration: identified on the fit bags, {what} ({stats}; against the default "
                     f"{default_s * 1e3:.3g} ms); used")
+    best_txt = (f"best alternative {what}: {'; '.join(why)}" if d2 is not ds
+                else "no alternative lowers the CV error")
     return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms, no timing column) "
-                f"is kept (best alternative {what}: {'; '.join(why) or 'none better'}; {stats})")
+                f"is kept ({best_txt}; {stats})")
