@@ -166,8 +166,8 @@ class SignalResult:
     cv_trace: list[dict] = field(default_factory=list)
     offsets: dict = field(default_factory=dict)  # bag name -> estimated theta_m offset (rad)
     comparisons: dict = field(default_factory=dict)
-    # per-block leave-one-block-out SSE of the selected model on the fit bags (before the held-out arbiter; the
-    # fit data's own measure of the whole model, used to choose the acceleration window: choose_alpha_window)
+    # per-block leave-one-block-out SSE of the selected model on the fit bags (before the held-out arbiter): the fit
+    # data's own measure of the whole model, for comparing settings on the same rows (diagnosis; no rule reads it)
     cv_folds: np.ndarray | None = None
     # arrays for plots (held-out scored rows)
     plot: dict = field(default_factory=dict)
