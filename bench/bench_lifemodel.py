@@ -1,6 +1,7 @@
 """Cost of the life model's path families: one leave-one-out fold fitted with ``path="power"`` (the baseline) and
 ``path="auto"`` (power law and crack-growth path, lowest AIC kept), same units, same run; prints CPU and wall
-seconds and the ratio auto / power (the criterion for the default of ``hdphm prognostic fit --path``).
+seconds and the ratio auto / power (the criterion for the default of ``hdphm prognostic fit --path``). The
+failure-time likelihood is the CLI's default, ``failure_at="auto"`` (both datasets: the recorded crossing).
 
     hdphm bench lifemodel --extra --virkler DATA/virkler [--nasa DATA/nasa_battery] [--draws 20] [--fold 0]
 """
@@ -23,7 +24,7 @@ def _fold(name, hi, ev, level, args):
     for path in ("power", "auto"):
         c0, t0 = time.process_time(), time.perf_counter()
         m = LifeModel.fit(train, exposure="csv exposure", feature="hi", time_unit="step", n_draws=args.draws,
-                          seed=0, threshold="auto", failure_level=level, path=path)
+                          seed=0, threshold="auto", failure_level=level, path=path, failure_at="auto")
         row[path] = (time.process_time() - c0, time.perf_counter() - t0, m.path, m.threshold,
                      m.fit_info["log_likelihood"])
     (cp, wp, *_), (ca, wa, fam, thr, ll) = row["power"], row["auto"]

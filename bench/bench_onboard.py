@@ -3,7 +3,8 @@
 1. Core throughput: samples/s through conditioning + expected response +
    residuals + detector + windows, in blocks of 1000 (target >= 10 kS/s on
    one core), for the physics-only stand-in and, with ``--model-dir``, the
-   ONNX twin.
+   ONNX twin, the latter in both streaming modes (``OnboardConfig.twin_fixed_lag``: fixed lag, the
+   default, and causal) in the same run.
 2. Core per-sample latency at 1 kHz (one sample per call, as at real time):
    the baseline is the block path fed one-row blocks (what the node did
    before the short path), measured in the same run on the same samples;
@@ -75,6 +76,7 @@ def core_bench(a) -> None:
     from synth import make_mission
 
     from hd_onboard.batch import run_mission
+    from hd_onboard.config import OnboardConfig
     from hd_onboard.core import OnboardCore
     from hd_onboard.windows import window_row
     from hd_onboard.expected import make_expected
@@ -85,12 +87,14 @@ def core_bench(a) -> None:
     stamps = m.t0_ns + np.round(m.t * 1e9).astype(np.int64)
     V = np.column_stack([m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red])
     ff = window_feature_fn({}, m.meta.gear_ratio)
-    kinds = [("standin", "")] + ([("onnx", a.model_dir)] if a.model_dir else [])
-    for kind, md in kinds:
+    kinds = [("standin", "", True)] + ([("onnx fixed-lag", a.model_dir, True), ("onnx causal", a.model_dir, False)]
+                                       if a.model_dir else [])
+    for kind, md, lag in kinds:
         p = ph.TwinParams.from_yaml().with_meta(gear_ratio=m.meta.gear_ratio)
+        cfg = OnboardConfig(twin_fixed_lag=lag)
         ts = []
         for _ in range(a.repeat):
-            core = OnboardCore(make_expected(md or None, p, fs_hz=1000.0), p, feature_fn=ff)
+            core = OnboardCore(make_expected(md or None, p, fs_hz=1000.0), p, feature_fn=ff, config=cfg)
             t0 = time.perf_counter()
             run_mission(m, core, block=1000)
             ts.append(time.perf_counter() - t0)
@@ -100,7 +104,7 @@ def core_bench(a) -> None:
         n = min(m.n, int(a.latency_samples))
         sl, vl = stamps[:n].tolist(), V[:n].tolist()
         # baseline: the block path, one-row blocks, windows inline
-        core = OnboardCore(make_expected(md or None, p, fs_hz=1000.0), p, feature_fn=ff)
+        core = OnboardCore(make_expected(md or None, p, fs_hz=1000.0), p, feature_fn=ff, config=cfg)
         lb = np.empty(n)
         for i in range(n):
             t0 = time.perf_counter()
@@ -108,7 +112,7 @@ def core_bench(a) -> None:
             lb[i] = time.perf_counter() - t0
         res = {}
         for defer in (False, True):
-            core = OnboardCore(make_expected(md or None, p, fs_hz=1000.0), p, feature_fn=ff)
+            core = OnboardCore(make_expected(md or None, p, fs_hz=1000.0), p, feature_fn=ff, config=cfg)
             core.defer_windows = defer
             ls = np.empty(n)
             for i in range(n):

@@ -11,7 +11,10 @@ have; NASA / Virkler: the exponential-fade / Paris-law particle filters of ``rea
 
 Datasets (each optional): simulated fleets (``--fleet NAME=DIR``, their ``fleet_truth.json`` gives the
 failure missions, written as an events file: what an operator records), NASA cells (``--nasa DIR``, failure =
-capacity <= 80 % of rated; 70 % leaves 1 failure in some training folds), Virkler (``--virkler DIR``).
+capacity <= 80 % of rated; 70 % leaves 1 failure in some training folds), Virkler (``--virkler DIR``). The
+failure-time likelihood follows each dataset's failure definition (``--failure-at auto``,
+``lifemodel.failure_at_rule``): a recorded crossing of a known level for NASA (1.6 Ah) and Virkler (49.8 mm),
+found-failed intervals for the bag fleets.
 The degradation clock of the simulated fleets is chosen by maximum likelihood on the fleet named by
 ``--dev`` (all its units) and then fixed for every other fleet: no choice is made on the scored units.
 
@@ -58,11 +61,11 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
                           seed=seed, threshold=THRESHOLD[0], failure_level=level,
-                          path=PATH[0])
+                          path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
-        sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
+        sg["threshold"] = _label(m)
         if progress:
             print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
@@ -74,6 +77,14 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
 
     res = _run_folds(fold, [i for i, u in enumerate(units) if u.events.failure is not None])
     return [r[0] for r in res], [r[1] for r in res], [r[2] for r in res]
+
+
+def _label(m):
+    """Path, threshold and failure-time likelihood of a fold's fit, e.g. 'paris observable (crossing, fitted level)'."""
+    lab = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
+    if m.fit_info.get("failure_at") == "crossing":  # the failure level fixed at its definition or fitted
+        lab += f" (crossing, {m.fit_info.get('level', 'fixed')} level)" if m.fit_info.get("level") else " (crossing)"
+    return lab
 
 
 JOBS = [1]  # processes for the leave-one-unit-out folds (--jobs)
@@ -115,7 +126,8 @@ def _run_folds(fold, items):
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
 PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth shape by AIC per fit)
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
-FAILURE_AT = ["interval"]  # Virkler: the failure time as the measured length's crossing time (--virkler-failure)
+RATE = ["mean"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
+FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
 
 def _predict_all(m, test, eol, samples, seed):
@@ -272,10 +284,18 @@ def main(argv=None) -> int:
     ap.add_argument("--no-known-level", dest="known_level", action="store_false",
                     help="NASA / Virkler: fit the observable threshold's level instead of taking it from the failure "
                          "definition (80 %% of rated capacity, 49.8 mm)")
-    ap.add_argument("--virkler-failure", default="crossing", choices=("crossing", "interval"),
-                    help="Virkler: the failure time is the cycle count at which the measured length reached 49.8 mm "
-                         "(crossing: its density, the level in the path's coordinates fitted or fixed by AIC) or the "
-                         "failure happened between the last record and that count (interval)")
+    ap.add_argument("--failure-at", default="auto", choices=("auto", "crossing", "interval"),
+                    help="failure-time likelihood: auto (the default) follows each dataset's failure definition "
+                         "(lifemodel.failure_at_rule: crossing where failure is the recorded HI reaching a known level "
+                         "and the records run through it, NASA and Virkler; interval otherwise, the bag fleets), or "
+                         "force crossing (the density of the recorded crossing time, the level fixed or fitted by "
+                         "AIC) / interval (failed between the last record and the failure time)")
+    ap.add_argument("--exposure-rate", default="mean", choices=("median", "mean"),
+                    help="the prognosis's rate of a unit's future exposure per mission: mean (default) or median of "
+                         "its record's per-step rates (src/hd_prognostic/README.md, 'Dev-fleet coverage diagnosis'; "
+                         "CSV datasets with exposure = time are unchanged)")
+    ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),
+                    help="Virkler only: override --failure-at (kept for older commands)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=1,
                     help="processes for the leave-one-unit-out folds (same results as 1, in the same order)")
@@ -284,6 +304,8 @@ def main(argv=None) -> int:
     DRAWS[0] = args.draws
     THRESHOLD[0] = args.threshold
     PATH[0] = args.path
+    FAILURE_AT[0] = args.failure_at
+    RATE[0] = args.exposure_rate
     JOBS[0] = args.jobs
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -320,7 +342,7 @@ def main(argv=None) -> int:
 
         t0 = time.perf_counter()
         hi, ev = virkler_records(args.virkler, out)
-        FAILURE_AT[0] = args.virkler_failure
+        FAILURE_AT[0] = args.virkler_failure or args.failure_at
         res = csv_dataset_every("virkler", hi, ev, args,  # failure defined as the measured length reaching 49.8 mm
                                 level=VIRKLER_LENGTHS_MM[-1] * 1e-3 if args.known_level else None)
         r = run_virkler(args.virkler, n_particles=args.particles, seed=args.seed)
@@ -388,13 +410,11 @@ def _louo_subset(units, eols, args, name, level=None):
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed,
                           threshold="observable" if FAILURE_AT[0] == "crossing" else THRESHOLD[0],
-                          failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0])
+                          failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
-        sg["threshold"] = m.threshold if m.path == "power" else f"{m.path} {m.threshold}"
-        if m.fit_info.get("level"):  # crossing likelihood: the failure level fixed at its definition or fitted
-            sg["threshold"] += f" ({m.fit_info['level']} level)"
+        sg["threshold"] = _label(m)
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "

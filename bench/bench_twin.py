@@ -17,7 +17,14 @@ the measured Q_red) and the maximum error of
 * ``pure LSTM``: the same network and preset with lambda_c = 0 and no physics path.
 
 ``hdphm bench twin --extra --streaming [MODEL_DIR]``: the former streaming benchmark (ONNX Runtime vs
-PyTorch, sample by sample and in blocks; the physics overhead of one training step).
+PyTorch, sample by sample and in blocks; the physics overhead of one training step), and the streaming
+twin's physics path before (``legacy_physics``: the derivative re-evaluated on the history at every call)
+and after (fixed FIR weights; causal and fixed-lag), interleaved in the same run, with ratios.
+
+``hdphm bench twin --extra --streaming-error MODEL_DIR BAGS [--block 20] [--settle 0.05]``: accuracy of the
+streaming twin against the batch twin on every mission of BAGS fed in blocks: causal and fixed-lag mode,
+NRMSE and maximum error on the samples the batch metrics score (edge samples out), plus the causal mode's
+maximum outside the onboard's settle interval after each reset.
 
 Options (after ``--extra``): ``--families a,b`` (default: all, plus ``plant2``), ``--actuators N``
 (per source, default 6), ``--held-out K`` (default 2), ``--missions M`` (default 2), ``--duration S``
@@ -286,6 +293,54 @@ def streaming(argv: list[str]) -> int:
         for i in range(0, 2000, 100):
             tw.step(X[i:i + 100])
 
+    # the physics path before / after the FIR, interleaved (same process, same load)
+    legacy = StreamingTwin(model_dir, fs_in=fs_model, gear_ratio=m.meta.gear_ratio, legacy_physics=True)
+    lagged = StreamingTwin(model_dir, fs_in=fs_model, gear_ratio=m.meta.gear_ratio, mode="fixed_lag")
+
+    def feed(t, block, n):
+        def f():
+            t.reset(fs_model)
+            for i in range(0, n, block):
+                t.step(X[i:i + block])
+        return f
+
+    variants = (("before (re-fit per call)", legacy), ("after, causal", tw), ("after, fixed-lag", lagged))
+    cases = [(name, kind, feed(t, b, n)) for name, t in variants for kind, b, n in (("one", 1, 200), ("block", 100, 2000))]
+    rounds = {(name, kind): [] for name, kind, _ in cases}
+    for _ in range(7):  # interleaved rounds: a load change hits every variant alike
+        for name, kind, f in cases:
+            rounds[(name, kind)].append(_median_time(f, 1))
+    # the physics path alone, one model-rate row per call (what the FIR replaced), before / after
+    rows = X[:200]
+
+    def path_legacy():
+        legacy.reset(fs_model)
+        for i in range(200):
+            legacy._phys_legacy(rows[i:i + 1])
+
+    def path_fir():
+        tw.reset(fs_model)
+        for i in range(200):
+            tw._phys_causal(rows[i:i + 1])
+
+    for name, f in (("path before", path_legacy), ("path after", path_fir)):
+        rounds[(name, "one")] = []
+    for _ in range(7):
+        for name, f in (("path before", path_legacy), ("path after", path_fir)):
+            rounds[(name, "one")].append(_median_time(f, 1))
+    med = {k: statistics.median(v) for k, v in rounds.items()}
+    pb, pa = med[("path before", "one")], med[("path after", "one")]
+    print(f"  physics path alone, one row per call: before {pb / 200 * 1e6:.1f} us, after (FIR) {pa / 200 * 1e6:.1f} us"
+          f"   speed-up x{pb / pa:.1f}")
+    print(f"streaming twin with its physics path ({'active' if tw.physpath.active else 'none'}; fixed-lag latency "
+          f"{lagged.lag_samples} samples = {lagged.lag_s * 1e3:.1f} ms), median of 7 interleaved rounds, 1 thread:")
+    for kind, n in (("one", 200), ("block", 2000)):
+        base = med[("before (re-fit per call)", kind)]
+        for name, _ in variants:
+            v = med[(name, kind)]
+            print(f"  {kind:5s} {name:26s} {v / n * 1e6:8.1f} us/sample  {n / v / fs_model:8.1f} x real time  "
+                  f"speed-up vs before x{base / v:5.2f}")
+
     def torch_block():
         st = (torch.zeros(L, 1, H), torch.zeros(L, 1, H))
         with torch.no_grad():
@@ -323,10 +378,71 @@ def streaming(argv: list[str]) -> int:
     return 0
 
 
+def streaming_error(argv: list[str]) -> int:
+    """Streaming (causal, fixed-lag) vs batch twin on the missions of BAGS (see the module docstring)."""
+    p = argparse.ArgumentParser(prog="hdphm bench twin --extra --streaming-error")
+    p.add_argument("model")
+    p.add_argument("bags", nargs="+")
+    p.add_argument("--block", type=int, default=20, help="input rows per call (default 20)")
+    p.add_argument("--settle", type=float, default=0.05, help="onboard settle interval [s] (default 0.05)")
+    a = p.parse_args(argv)
+    from hd_twin import data as D
+    from hd_twin.modeldir import predict_outputs, q_from_outputs
+    from hd_twin.runtime import StreamingTwin
+    from hd_twin.train import load_missions, load_pinn
+
+    pinn, norm, cfg = load_pinn(a.model)
+    fs_model = cfg["preprocessing"]["fs_model"]
+    missions = load_missions(a.bags)
+    errs = {"batch": [], "causal": [], "fixed_lag": []}
+    y_all, worst_settled = [], (0.0, "")
+    for m in missions:
+        segs = D.preprocess(m, fs_model, T_ref=pinn.params.T_ref, names=cfg["features"],
+                            speed_timing=cfg.get("speed_timing"))
+        ref = q_from_outputs(pinn, segs, predict_outputs(pinn, segs, norm))
+        X = D.mission_inputs(m)
+        bounds = [(s0, s1) for s0, s1 in D.segment_bounds(m.segment) if s1 - s0 >= max(3, 16 * round(m.fs / fs_model))]
+        streams = {}
+        for mode in ("causal", "fixed_lag"):
+            tw = StreamingTwin(a.model, fs_in=m.fs, gear_ratio=m.meta.gear_ratio, mode=mode)
+            per = []
+            for s0, s1 in bounds:
+                tw.reset(m.fs, m.meta.gear_ratio)
+                outs = [tw.step(X[i:min(i + a.block, s1)]) for i in range(s0, s1, a.block)] + [tw.flush()]
+                per.append(np.concatenate([o["Q_red"] for o in outs]))
+            streams[mode] = per
+        for k, seg in enumerate(segs):
+            ok = seg.mask  # the batch metrics' samples: measured, not edge samples
+            y_all.append(seg.Q_red[ok])
+            errs["batch"].append((ref[k] - seg.Q_red)[ok])
+            for mode in ("causal", "fixed_lag"):
+                q = streams[mode][k]
+                if len(q) != seg.n:
+                    raise SystemExit(f"{m.report.path}: {mode} gave {len(q)} outputs for {seg.n} model samples")
+                errs[mode].append((q - seg.Q_red)[ok])
+            q = streams["causal"][k]
+            settled = ok & (np.arange(seg.n) * seg.dt >= a.settle)
+            e = np.abs(q - seg.Q_red)[settled]
+            if len(e) and e.max() > worst_settled[0]:
+                worst_settled = (float(e.max()), f"{m.report.path} sample {int(np.flatnonzero(settled)[np.argmax(e)])}")
+    y = np.concatenate(y_all)
+    rng_y = float(y.max() - y.min())
+    print(f"model {a.model} ({fs_model:.0f} Hz), {len(missions)} missions, {len(y)} scored samples (edge samples out), "
+          f"streamed in blocks of {a.block} input rows")
+    for mode, ee in errs.items():
+        e = np.concatenate(ee)
+        print(f"  {mode:9s}  NRMSE {100 * np.sqrt(np.mean(e ** 2)) / rng_y:6.3f} %   max error {np.max(np.abs(e)):8.1f} N*m")
+    print(f"  causal, after the onboard settle ({a.settle * 1e3:.0f} ms after each reset): max {worst_settled[0]:.1f} N*m "
+          f"({worst_settled[1]})")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(argv or [])
     if argv and argv[0] == "--streaming":
         return streaming(argv[1:])
+    if argv and argv[0] == "--streaming-error":
+        return streaming_error(argv[1:])
     return compare(argv)
 
 

@@ -47,6 +47,10 @@ def run_mission(mission, core: OnboardCore | None = None, block: int = 1000, **k
         tables.append(r.table)
         windows += r.windows
         events += r.events
+    r = core.drain()  # a fixed-lag twin's last rows (before the last window closes)
+    tables.append(r.table)
+    windows += r.windows
+    events += r.events
     windows += core.flush()
     core.end_mission()
     table = np.concatenate(tables) if tables else np.empty((0, len(RESIDUAL_COLUMNS)))

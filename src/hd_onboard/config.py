@@ -26,6 +26,11 @@ class OnboardConfig:
     hold_s: float = 2.0  # s, a raised flag is held at least this long
     warmup_s: float = 5.0  # s, twist zero and, without ground thresholds, self-calibration
     settle_s: float = 0.05  # s, not evaluated after a reset (filter / LSTM transient)
+    # trained twin streamed with a fixed lag (hd_twin.runtime.StreamingTwin mode "fixed_lag"): its output for
+    # sample k equals the batch twin's and comes when sample k + lag arrives (half the derivative window: 15 ms
+    # at 1 kHz; + 10 ms with speed re-timing); residual k is measurement k minus that output, so every flag
+    # decision is that much later. False: causal twin (no delay, one-sided derivative: 2x the max error at 1 kHz).
+    twin_fixed_lag: bool = True
     max_gap_samples: int = 10  # dropout longer than this -> new segment
     nominal_fs: float = 0.0  # Hz; 0: estimated from the first stamps
     accel_cutoff_hz: float = 50.0  # Hz, stand-in derivative filter
@@ -70,6 +75,8 @@ class OnboardConfig:
         if not (self.fric_excess_warn <= self.fric_excess_error and self.fric_min_var_u < 1.0):
             raise ValueError(f"onboard parameters fric_excess_warn={self.fric_excess_warn}, fric_excess_error="
                              f"{self.fric_excess_error} need warn <= error; fric_min_var_u={self.fric_min_var_u} < 1")
+        if not isinstance(self.twin_fixed_lag, bool):
+            raise ValueError(f"onboard parameter twin_fixed_lag = {self.twin_fixed_lag!r} must be true or false")
         if not (self.nominal_fs == 0 or 10 <= self.nominal_fs <= 1e5):
             raise ValueError(f"onboard parameter nominal_fs = {self.nominal_fs} Hz outside 10..1e5 (0 = estimate)")
         return self

@@ -188,7 +188,13 @@ class OnboardCore:
             self.residuals.rate_known(self.guard.fs, None, self.guard.note)
 
     def end_mission(self) -> None:
-        """End of the mission (batch / a new /hd/mission): notes what could not be evaluated."""
+        """End of the mission (batch / a new /hd/mission): the rows a fixed-lag twin still holds (:meth:`drain`,
+        into :meth:`take_rows` / :meth:`take_events` / :meth:`take_windows`); notes what could not be evaluated."""
+        r = self.drain()
+        for row in r.table:
+            self.rows.append(row)
+        self.events.extend(r.events)
+        self.windows.extend(r.windows)
         self.guard.end_mission(self.warmup.done)
 
     def push_temperature(self, stamp_ns: int, value: float) -> None:
@@ -223,16 +229,35 @@ class OnboardCore:
             if msg is not None:
                 self.residuals.twist_reference_problem(g.fs, msg, g.note)
         c = g.condition(stamps_ns, V)  # 2. gaps, NaN, held twin inputs
-        r = self.residuals.block(c.t, V, c.Vh, c.valid, c.reset_at)  # 3. expected response, residuals
+        r = self.residuals.block(c.t, V, c.Vh, c.valid, c.reset_at, stamps_ns)  # 3. expected response, residuals
         g.health.n_resets += r.n_resets
-        r_tw = self._warmup_block(c.t, V, r)  # 4. warm-up: twist zero, references, self-calibration
+        g.last_ns = int(stamps_ns[-1])
+        if r.t is None:  # the block's own rows (no fixed-lag twin)
+            r = r._replace(t=c.t, stamps=stamps_ns, V=V)
+        return self._after_residuals(r)
+
+    def _after_residuals(self, r: BlockResiduals) -> PushResult:
+        """Warm-up, detection, table and windows of the rows the residuals ``r`` belong to (``r.t``, ``r.stamps``,
+        ``r.V``: a fixed-lag twin's rows come ``lag_samples`` late)."""
+        t, stamps_ns, V = r.t, r.stamps, r.V
+        if len(t) == 0:
+            return PushResult(np.empty((0, len(RESIDUAL_COLUMNS))), self.level)
+        r_tw = self._warmup_block(t, V, r)  # 4. warm-up: twist zero, references, self-calibration
         es, lev, stiff, fric, events = self.detection.block(  # 5. detectors, monitors, level
-            c.t, stamps_ns, r.r_Q, r_tw, r.twist_raw, r.Q_for_twist, V[:, 2], r.evaluate)
+            t, stamps_ns, r.r_Q, r_tw, r.twist_raw, r.Q_for_twist, V[:, 2], r.evaluate)
         table = np.column_stack([stamps_ns * 1e-9, r.Q_meas, r.Q_hat, r.r_Q, es["Q_red"], r_tw, es["twist"],
                                  lev.astype(float), stiff, fric])
-        g.last_ns = int(stamps_ns[-1])
-        windows = self.win.block(c.t, table, V, self._close_window)  # 6. windows
+        windows = self.win.block(t, table, V, self._close_window)  # 6. windows
         return PushResult(table, self.level, events, windows)
+
+    def drain(self) -> PushResult:
+        """End of the mission with a fixed-lag twin: the rows it still holds (the segment's last ``lag_samples``,
+        not evaluated: the batch twin's edge samples) go through warm-up, detection and windows; empty otherwise.
+        :meth:`end_mission` calls it (its rows, events and windows then wait in :meth:`take_rows` etc.)."""
+        r = self.residuals.drain()
+        if r is None:
+            return PushResult(np.empty((0, len(RESIDUAL_COLUMNS))), self.level)
+        return self._after_residuals(r)
 
     def _warmup_block(self, t: np.ndarray, V: np.ndarray, r: BlockResiduals) -> np.ndarray:
         """Warm-up collection and, at its end, what it taught; the twist channel relative to its zero."""
@@ -296,18 +321,30 @@ class OnboardCore:
                 or (stamp_ns - last) * 1e-9 * fs > 1.5
                 or ((wu.twist_zero is None or not det.calibrated)
                     and (stamp_ns - g.t0_ns) * 1e-9 >= cfg.warmup_s)  # end of warm-up: block path
-                or not hasattr(res.expected, "step_one")):
+                or not hasattr(res.expected, "step_one") or res.irregular):  # rows of a replaced twin wait
             r = self.push(np.array([stamp_ns], np.int64), np.array([v], np.float64))
-            if len(r.table):
-                self.rows.append(r.table[0])
+            for row in r.table:  # a fixed-lag twin may give several rows (or none) for one sample
+                self.rows.append(row)
             self.events.extend(r.events)
             self.windows.extend(r.windows)
             return self.level
         g.health.n_samples += 1
         t = (stamp_ns - g.t0_ns) * 1e-9
-        Q_hat, r_Q, Qt, tw_raw, twist = res.one(t, tm, tf, wm, wf, tau, Q)
         h = g.hold
         h[0], h[1], h[2], h[3], h[4], h[5] = tm, tf, wm, wf, tau, Q
+        g.last_ns = stamp_ns
+        if res.delayed:  # a fixed-lag twin: the rows whose output came with this sample (usually the one lag back)
+            lev = self.level
+            for tk, sk, vk, out in res.one_delayed(t, stamp_ns, v):
+                lev = self._one_row(tk, sk, vk, *out)
+            return lev
+        return self._one_row(t, stamp_ns, h, *res.one(t, tm, tf, wm, wf, tau, Q))
+
+    def _one_row(self, t: float, stamp_ns: int, v, Q_hat: float, r_Q: float, Qt: float, tw_raw: float,
+                 twist: float) -> int:
+        """Warm-up, detection, row and window of one sample whose residuals are known (the short path)."""
+        wu, det, cfg = self.warmup, self.detection, self.cfg
+        tm, tf, wm, wf, tau, Q = v
         if wu.twist_zero is None:  # warm-up (t < warmup_s here)
             wu.one(t, tm, tf, wm, wf, tau, Q, tw_raw, Qt, r_Q, twist)
             r_tw = math.nan
@@ -318,8 +355,7 @@ class OnboardCore:
         lev, e_Q, e_tw, stiff, fric = det.one(t, stamp_ns, r_Q, r_tw, tw_raw, Qt, wm, self.events)
         row = (stamp_ns * 1e-9, Q, Q_hat, r_Q, e_Q, r_tw, e_tw, float(lev), stiff, fric)
         self.rows.append(row)
-        g.last_ns = stamp_ns
-        w = self.win.one(t, row, h, self._close_window)
+        w = self.win.one(t, row, v, self._close_window)
         if w is not None:
             self.windows.append(w)
         return lev

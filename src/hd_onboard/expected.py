@@ -175,6 +175,23 @@ class OnnxTwinExpected:
         self.version = str(cfg.get("version") or cfg.get("model_version") or model_dir)
         self.N, self.fs = N, fs_hz
         self._last = np.nan
+        self._fed = 0  # input rows fed since the reset
+        self._ready = 0  # input rows whose Q_red_hat was given out
+
+    @property
+    def lag_samples(self) -> int:
+        """Input rows between a row's arrival and its Q_red_hat (``StreamingTwin.lag_samples``; 0: causal)."""
+        return int(self.twin.lag_samples)
+
+    @property
+    def delayed(self) -> bool:
+        """Fixed-lag twin: :meth:`step` answers for the oldest rows not given out yet (see there)."""
+        return self.twin.mode == "fixed_lag"
+
+    def set_mode(self, mode: str) -> None:
+        """``"causal"`` or ``"fixed_lag"`` (``StreamingTwin.set_mode``); resets."""
+        self.twin.set_mode(mode)
+        self._last, self._fed, self._ready = np.nan, 0, 0
 
     @property
     def fs_in(self) -> float:
@@ -203,14 +220,21 @@ class OnnxTwinExpected:
             return
         self.twin.reset(fs_new, N_new)  # raises before any state is changed here
         self.fs, self.N = fs_new, N_new
-        self._last = np.nan
+        self._last, self._fed, self._ready = np.nan, 0, 0
 
     def reset(self) -> None:
         self.twin.reset(self.fs, self.N)
-        self._last = np.nan
+        self._last, self._fed, self._ready = np.nan, 0, 0
 
     def step(self, t: np.ndarray, X: np.ndarray) -> np.ndarray:
-        """Q_red_hat per input sample; a decimating twin's outputs are held (zero-order) in between."""
+        """Q_red_hat per input sample; a decimating twin's outputs are held (zero-order) in between.
+
+        Fixed-lag twin (:attr:`lag_samples` > 0): Q_red_hat of the oldest rows not given out yet, in order, as
+        many as became known (possibly none; a row between two model samples once the earlier one is out);
+        :meth:`flush` gives the rest at the end of a segment."""
+        if self.twin.mode == "fixed_lag":
+            self._fed += len(X)
+            return self._lagged(self.twin.step(X), final=False)
         out = self.twin.step(X)
         q = np.asarray(out["Q_red"], dtype=float)
         idx = np.asarray(out.get("index", np.arange(len(q))), dtype=np.int64)
@@ -223,8 +247,33 @@ class OnnxTwinExpected:
             self._last = float(res[-1])
         return res
 
+    def flush(self) -> np.ndarray:
+        """End of a segment: Q_red_hat of the rows not given out yet (fixed-lag; causal: none)."""
+        if self.twin.mode != "fixed_lag":
+            return np.zeros(0)
+        return self._lagged(self.twin.flush(), final=True)
+
+    def _lagged(self, out: dict, final: bool) -> np.ndarray:
+        """Rows ``_ready`` .. made known by the twin outputs ``out`` (samples since the reset, held in between)."""
+        s = np.asarray(out["sample"], dtype=np.int64)
+        q = np.asarray(out["Q_red"], dtype=float)
+        if len(s) == 0 and not final:
+            return np.zeros(0)
+        d = int(self.twin.decimation)
+        stop = self._fed if final else min(self._fed, int(s[-1]) + d)
+        rows = np.arange(self._ready, stop)
+        if len(s):  # the newest model sample at or before each row
+            k = np.searchsorted(s, rows, side="right") - 1
+            res = np.where(k >= 0, q[np.maximum(k, 0)], self._last)
+        else:
+            res = np.full(len(rows), self._last)
+        self._ready = stop
+        if len(res):
+            self._last = float(res[-1])
+        return res
+
     def step_one(self, t: float, x: np.ndarray) -> float:
-        """One sample (the onboard short path): same as :meth:`step` on a one-row block."""
+        """One sample (the onboard short path, causal twin only): same as :meth:`step` on a one-row block."""
         q = self.twin.step(x[None, :])["Q_red"]
         if len(q) and np.isfinite(q[-1]):
             self._last = float(q[-1])
@@ -233,6 +282,7 @@ class OnnxTwinExpected:
 
 def make_expected(model_dir: str | None, params: ph.TwinParams, effects=ph.DEFAULT_EFFECTS,
                   fs_hz: float | None = 1000.0, log=None) -> Any:
+    # the trained twin's streaming mode (causal / fixed lag) is set by the core from OnboardConfig.twin_fixed_lag
     """The ONNX twin when ``model_dir`` is given and loads, else the physics-only stand-in (logged).
 
     ``fs_hz`` [Hz]: the joint-state rate when known (None: not yet; the ONNX twin starts at its own

@@ -55,6 +55,11 @@ class BlockResiduals(NamedTuple):
     twist: np.ndarray  # rad, twist_raw - Q_for_twist / K_out (before the warm-up's zero)
     evaluate: np.ndarray  # bool, valid sample outside a settle interval
     n_resets: int  # model resets (dropouts) in the block
+    # the rows these residuals belong to (a fixed-lag twin gives them lag samples late: earlier rows than the
+    # block's, and fewer or more of them); all None: the block's rows (OnboardCore.push fills them in)
+    t: np.ndarray | None = None  # s since mission start
+    stamps: np.ndarray | None = None  # ns
+    V: np.ndarray | None = None  # samples (columns JS_COLS)
 
 
 class Residuals:
@@ -67,7 +72,12 @@ class Residuals:
         #: :attr:`expected` is the one running now (the physics stand-in after a fallback)
         self.expected_configured = expected or PhysicsStandInExpected(params, fs_hz=cfg.nominal_fs or 1000.0,
                                                                       accel_cutoff_hz=cfg.accel_cutoff_hz)
+        set_mode = getattr(self.expected_configured, "set_mode", None)
+        if set_mode is not None:  # a trained twin: causal or fixed lag (OnboardConfig.twin_fixed_lag)
+            set_mode("fixed_lag" if cfg.twin_fixed_lag else "causal")
         self.expected = self.expected_configured
+        self._queue: tuple | None = None  # rows waiting for a fixed-lag twin's output: (t, stamps, V, ok)
+        self._carry: np.ndarray | None = None  # Q_hat of queued rows from a model no longer running
 
     def new_mission(self) -> None:
         """The configured model again, reset; temperature and command unknown; the mission start is a reset
@@ -79,6 +89,18 @@ class Residuals:
         self.expected.reset()
         self.settle_until = self.settle_s  # s since mission start: not evaluated before
         self._x1 = np.full(7, np.nan)
+        self._queue = None
+        self._carry = None
+
+    @property
+    def lag_samples(self) -> int:
+        """Rows between a sample's arrival and its residual (a fixed-lag twin; 0 otherwise)."""
+        return int(getattr(self.expected, "lag_samples", 0) or 0)
+
+    @property
+    def delayed(self) -> bool:
+        """The model running now answers for earlier rows (a fixed-lag twin): rows wait in a queue."""
+        return bool(getattr(self.expected, "delayed", False))
 
     @property
     def settle_s(self) -> float:
@@ -106,6 +128,7 @@ class Residuals:
         exp = PhysicsStandInExpected(self.params, fs_hz=fs or cfg.nominal_fs or 1000.0,
                                      accel_cutoff_hz=cfg.accel_cutoff_hz)
         exp.fallback_reason = reason
+        self._hold_back()
         self.expected = exp
         note(key, level, reason)
 
@@ -117,6 +140,7 @@ class Residuals:
         conf = getattr(self.expected, "configure", None)
         if conf is None or getattr(self.expected, "fs_in", None) == fs:
             return
+        self._hold_back()  # configure resets the model
         try:
             conf(fs_hz=fs)
         except ValueError as e:
@@ -138,9 +162,15 @@ class Residuals:
 
     # ---- the two paths ---------------------------------------------------------------------------
     def block(self, t: np.ndarray, V: np.ndarray, Vh: np.ndarray, valid: np.ndarray,
-              reset_at: np.ndarray) -> BlockResiduals:
+              reset_at: np.ndarray, stamps: np.ndarray | None = None) -> BlockResiduals:
         """Residuals of a block: ``t`` [s since mission start], ``V`` samples (columns :data:`JS_COLS`), ``Vh``
-        the same with NaN held (twin input), ``valid`` rows, ``reset_at`` rows starting a new segment."""
+        the same with NaN held (twin input), ``valid`` rows, ``reset_at`` rows starting a new segment,
+        ``stamps`` [ns].
+
+        A fixed-lag twin (``lag_samples`` > 0) gives Q_hat ``lag_samples`` rows late: the rows wait here and the
+        residuals come for the rows whose Q_hat is known (``t``, ``stamps``, ``V`` of the result; residual k is
+        measurement k minus Q_hat k); at a reset the previous segment's last rows come out (not evaluated:
+        the batch twin's edge samples), the rest at :meth:`drain`."""
         cfg = self.cfg
         n = len(t)
         # twin inputs: held NaN, temperature and command held
@@ -152,29 +182,93 @@ class Residuals:
         X[:, 4] = Vh[:, 3]  # omega_f
         X[:, I_TEMP] = self.temperature
         X[:, I_REF] = self.theta_ref
-        # expected response, per segment (reset at dropouts)
-        Q_hat = np.empty(n)
+        # expected response, per segment (reset at dropouts); a fixed-lag twin answers for earlier rows (queued)
         settle_before = self.settle_until
         cuts = np.flatnonzero(reset_at)
         bounds = [0] + [int(c) for c in cuts if c > 0] + [n]
         n_resets = 0
+        # not evaluated: settle_s after each reset (per sample: a reset late in the block masks only what follows it)
+        settle = np.maximum(settle_before, np.maximum.accumulate(np.where(reset_at, t + self.settle_s, -np.inf)))
+        ok = valid & (t >= settle)
+        lagged = self.delayed or self._queue is not None
+        if lagged:
+            st = np.zeros(n, np.int64) if stamps is None else np.asarray(stamps, np.int64)
+            self._enqueue(t, st, V, ok)
+        parts, edge = [], []  # Q_hat of the next rows, in order; rows flushed at a segment end (not evaluated)
+        if self._carry is not None:  # a fixed-lag twin replaced by the stand-in: its held rows first
+            parts.append(self._carry)
+            edge.append(np.ones(len(self._carry), bool))
+            self._carry = None
         if len(cuts) and cuts[0] == 0:
+            self._flush_into(parts, edge)
             self._reset_segment(t[0])
             n_resets += 1
         for a, b in zip(bounds[:-1], bounds[1:]):
             if a > 0:
+                self._flush_into(parts, edge)
                 self._reset_segment(t[a])
                 n_resets += 1
-            Q_hat[a:b] = self.expected.step(t[a:b], X[a:b])
-        # residuals
+            q = np.asarray(self.expected.step(t[a:b], X[a:b]), dtype=float)
+            parts.append(q)
+            edge.append(np.zeros(len(q), bool))
+        Q_hat = np.concatenate(parts) if parts else np.zeros(0)
+        if not lagged:
+            return self._residuals(Q_hat, V, ok, n_resets)
+        tq, sq, Vq, okq = self._dequeue(len(Q_hat))
+        r = self._residuals(Q_hat, Vq, okq & ~np.concatenate(edge), n_resets)
+        return r._replace(t=tq, stamps=sq, V=Vq)
+
+    def drain(self) -> BlockResiduals | None:
+        """End of the mission: residuals of the rows a fixed-lag twin still holds (its segment's last samples,
+        the batch twin's edge samples: not evaluated); None when nothing waits."""
+        if self._queue is None or len(self._queue[0]) == 0:
+            return None
+        parts, edge = ([self._carry], []) if self._carry is not None else ([], [])
+        self._carry = None
+        self._flush_into(parts, edge)
+        q = np.concatenate(parts) if parts else np.zeros(0)
+        n = len(self._queue[0])
+        q = np.concatenate([q, np.full(n - len(q), np.nan)])  # rows no model answers for (model switched)
+        tq, sq, Vq, okq = self._dequeue(n)
+        self._reset_segment(float(tq[-1]))  # a sample pushed after this starts a new segment
+        return self._residuals(q, Vq, np.zeros(n, bool), 0)._replace(t=tq, stamps=sq, V=Vq)
+
+    def _hold_back(self) -> None:
+        """The running model is about to be reset or replaced: the rows a fixed-lag twin holds take its last
+        outputs now (:meth:`block` gives them out first, not evaluated)."""
+        waiting = 0 if self._queue is None else len(self._queue[0]) - (0 if self._carry is None else len(self._carry))
+        if waiting <= 0:
+            return
+        parts, edge = [], []
+        self._flush_into(parts, edge)
+        q = np.concatenate(parts) if parts else np.zeros(0)
+        q = np.concatenate([q[:waiting], np.full(max(0, waiting - len(q)), np.nan)])
+        self._carry = q if self._carry is None else np.concatenate([self._carry, q])
+
+    def _flush_into(self, parts: list, edge: list) -> None:
+        flush = getattr(self.expected, "flush", None)
+        if flush is not None:
+            q = np.asarray(flush(), dtype=float)
+            parts.append(q)
+            edge.append(np.ones(len(q), bool))
+
+    def _enqueue(self, t, stamps, V, ok) -> None:
+        new = (np.asarray(t, float), stamps, np.asarray(V, float), np.asarray(ok, bool))
+        self._queue = new if self._queue is None else tuple(np.concatenate([a, b]) for a, b in zip(self._queue, new))
+
+    def _dequeue(self, k: int):
+        q = self._queue
+        if k > len(q[0]):
+            raise RuntimeError(f"expected-response model gave {k} outputs for {len(q[0])} waiting rows")
+        self._queue = tuple(a[k:] for a in q)
+        return tuple(a[:k] for a in q)
+
+    def _residuals(self, Q_hat, V, evaluate, n_resets) -> BlockResiduals:
         Q_meas = V[:, 5]
         r_Q = Q_meas - Q_hat
         Q_for_twist = np.where(np.isfinite(Q_meas), Q_meas, Q_hat)
         twist_raw = V[:, 1] - V[:, 0] / self.params.N
         twist = twist_raw - Q_for_twist / self.params.K_out
-        # not evaluated: settle_s after each reset (per sample: a reset late in the block masks only what follows it)
-        settle = np.maximum(settle_before, np.maximum.accumulate(np.where(reset_at, t + self.settle_s, -np.inf)))
-        evaluate = valid & (t >= settle)
         r_Q = np.where(evaluate, r_Q, np.nan)
         twist = np.where(evaluate, twist, np.nan)
         twist_raw = np.where(evaluate, twist_raw, np.nan)
@@ -196,6 +290,40 @@ class Residuals:
         if t < self.settle_until:
             r_Q = twist = tw_raw = math.nan
         return Q_hat, r_Q, Qt, tw_raw, twist
+
+    @property
+    def irregular(self) -> bool:
+        """Outputs of a replaced / reset model still wait to be given out (the block path handles those)."""
+        return self._carry is not None
+
+    def one_delayed(self, t: float, stamp_ns: int, v):
+        """One valid sample inside a segment for a fixed-lag twin (the short path): the sample waits, the twin
+        steps, and the rows whose output came are returned, oldest first, as ``(t, stamp_ns, values,
+        (Q_hat, r_Q, Q_for_twist, twist_raw, twist))``; same arithmetic as :meth:`block`."""
+        tm, tf, wm, wf, tau, Q = v
+        x = self._x1
+        x[0], x[1], x[2], x[3], x[4] = tm, wm, tau, tf, wf
+        x[I_TEMP] = self.temperature
+        x[I_REF] = self.theta_ref
+        self._enqueue(np.array([t]), np.array([stamp_ns], np.int64), np.array([v], float),
+                      np.array([t >= self.settle_until]))
+        q = self.expected.step(np.array([t]), x[None, :])
+        if len(q) == 0:
+            return []
+        tq, sq, Vq, okq = self._dequeue(len(q))
+        p = self.params
+        out = []
+        for i in range(len(q)):
+            tm, tf, wm, wf, tau, Q = Vq[i].tolist()
+            Q_hat = float(q[i])
+            r_Q = Q - Q_hat
+            Qt = Q if Q == Q else Q_hat
+            tw_raw = tf - tm / p.N
+            twist = tw_raw - Qt / p.K_out
+            if not okq[i]:
+                r_Q = twist = tw_raw = math.nan
+            out.append((float(tq[i]), int(sq[i]), (tm, tf, wm, wf, tau, Q), (Q_hat, r_Q, Qt, tw_raw, twist)))
+        return out
 
     def _reset_segment(self, t_s: float) -> None:
         self.expected.reset()

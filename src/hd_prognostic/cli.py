@@ -290,7 +290,8 @@ def _fit_life(args) -> int:
                       "exposure_candidates": fi.get("exposure_candidates"),
                       "threshold_candidates": fi.get("threshold_candidates"),
                       "path": m.path, "path_aic": fi.get("path_aic"),
-                      "failure_at": fi.get("failure_at", "interval"), "level": fi.get("level"),
+                      "failure_at": fi.get("failure_at", "interval"), "failure_at_rule": fi.get("failure_at_rule"),
+                      "level": fi.get("level"),
                       "level_aic": fi.get("level_aic"),
                       "parameter_draws": len(m.draws),
                       "parameter_draws_ess": fi.get("parameter_uncertainty", {}).get("ess")}, indent=1, default=float))
@@ -420,17 +421,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold", choices=("auto", "latent", "observable"), default="auto",
                    help="failure threshold on the latent degradation or on the measured HI; auto: the "
                         "maximum-likelihood one (same parameter count, so also the AIC choice)")
-    p.add_argument("--path", choices=("power", "paris", "auto"), default="power",
+    p.add_argument("--path", choices=("power", "paris", "auto"), default="auto",
                    help="latent path family: power law, crack-growth (Paris-type, accelerating to a finite-time "
-                        "blow-up) shape, or auto: both fitted, the lower AIC kept (a fit costs ~5x the power law's)")
+                        "blow-up) shape, or auto (the default, the README's and the bench's model): both fitted, the "
+                        "lower AIC kept (a fit costs a few times the power law's; --path power for the quick one)")
     p.add_argument("--failure-level", type=float, default=None, metavar="HI",
                    help="when failure is defined as the measured HI reaching a known level (e.g. 1.6 Ah, 0.0498 m): "
                         "that level, the observable threshold's median (not fitted then; with --failure-at "
                         "crossing: this level or one fitted in the path's coordinates, the lower AIC)")
-    p.add_argument("--failure-at", choices=("interval", "crossing"), default="interval",
+    p.add_argument("--failure-at", choices=("auto", "interval", "crossing"), default="auto",
                    help="interval: a failure at t_f happened between the last record and t_f (found failed); "
-                        "crossing: t_f is the time the measured HI reached the failure level (continuous records, "
-                        "e.g. Virkler's cycles at 49.8 mm): its density is scored (observable threshold only)")
+                        "crossing: t_f is the time the measured HI reached the failure level (e.g. Virkler's cycles "
+                        "at 49.8 mm, NASA's first cycle at <= 1.6 Ah): its density is scored (observable threshold "
+                        "only); auto (the default): crossing when --failure-level is given and every failed unit's "
+                        "records run through its failure, the record at the failure time being the first at or past "
+                        "the level, else interval (the failure definition decides, not a score; printed as "
+                        "failure_at_rule)")
     p.set_defaults(func=_guard(_fit_life))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")

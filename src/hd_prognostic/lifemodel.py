@@ -183,12 +183,26 @@ class UnitHistory:
     hours_per_step: float | None = None
     events: UnitEvents = field(default_factory=UnitEvents)
     notes: list[str] = field(default_factory=list)
+    #: (t, y) of the first finite record at or after the failure (kept by :func:`attach_events` when it drops
+    #: those records): what :func:`failure_at_rule` reads to tell a failure defined as the recorded HI reaching
+    #: a level from one found at an inspection
+    failure_record: tuple[float, float] | None = None
 
-    def rate(self) -> float:
-        """Median exposure per time unit over the record (for extrapolation)."""
+    def rate(self, estimator: str = "median") -> float:
+        """Exposure per time unit over the record (for extrapolation). ``median`` (the default): the median of
+        the per-step rates; ``mean``: the exposure accrued over the steps with a known increment divided by their
+        time, the long-run accumulation rate (renewal theory: N(E) ~ E / mean). They differ where the per-step
+        increments are right-skewed (per-mission load work: the mean is 4.7 % above the median on average over the
+        dev fleet's units, -1.4 to +11.7 %, so the median extrapolates a failure exposure to a later time). The
+        prognosis uses :meth:`LifeModel.fit`'s ``exposure_rate`` (``src/hd_prognostic/README.md``, "Dev-fleet
+        coverage diagnosis")."""
+        if estimator not in ("median", "mean"):
+            raise ValueError(f"exposure rate estimator {estimator!r} is not one of median, mean")
         dt, dE = np.diff(self.t), np.diff(self.E)
         ok = (dt > 0) & np.isfinite(dE) & (dE >= 0)
         if ok.any():
+            if estimator == "mean":
+                return float(np.sum(dE[ok]) / np.sum(dt[ok]))
             return float(np.median(dE[ok] / dt[ok]))
         if self.E_next is not None and len(self.t):
             return float(self.E_next - self.E[-1])
@@ -226,6 +240,7 @@ def attach_events(units: list[UnitHistory], events: dict[str, UnitEvents], sourc
     for u in units:
         ev = events.get(u.unit, UnitEvents())
         u.events = ev
+        u.failure_record = None
         if ev.failure is not None:
             if not (u.t < ev.failure).any():
                 raise ValueError(f"{source}: {u.unit}: failure at {ev.failure:g} is not after its first record "
@@ -236,6 +251,8 @@ def attach_events(units: list[UnitHistory], events: dict[str, UnitEvents], sourc
                              f"health-indicator record ({u.t[-1]:g}); the exposure in between is extrapolated "
                              f"at the unit's median rate")
             late = u.t >= ev.failure
+            fin = np.flatnonzero(late & np.isfinite(u.y))
+            u.failure_record = (float(u.t[fin[0]]), float(u.y[fin[0]])) if len(fin) else None
             if late.any():
                 notes.append(f"{u.unit}: {int(late.sum())} record(s) at or after the failure at {ev.failure:g} not used")
                 keep = u.t[~late]
@@ -243,6 +260,45 @@ def attach_events(units: list[UnitHistory], events: dict[str, UnitEvents], sourc
                     u.E_next = float(u.exposure_at(keep[-1] + 1))
                 u.t, u.y, u.E = keep, u.y[~late], u.E[~late]
     return notes
+
+
+FAILURE_AT = ("interval", "crossing")  # failure-time likelihoods (LifeModel.fit(failure_at=...)); "auto": the rule
+
+
+def failure_at_rule(units: list[UnitHistory], failure_level: float | None) -> tuple[str, str]:
+    """Which failure-time likelihood the failure *definition* calls for (never chosen by a score).
+
+    ``crossing`` when failure is defined as the recorded HI reaching a known level (``failure_level`` given) and
+    the records say every failure is that: each failed unit has a record at its failure time that has reached the
+    level (kept by :func:`attach_events` as ``failure_record``) and no record before it had (NASA: the first cycle
+    whose measured capacity is <= 1.6 Ah; Virkler: the cycle count at which the measured length is 49.8 mm).
+    Otherwise ``interval`` (found failed at t_f: it failed somewhere after its last record): no level given, or a
+    failed unit without a record at its failure time, or one whose record there has not reached the level (the
+    failure was then something else). The direction of "reaching" is per unit, from its first record's side of
+    the level. Returns ``(failure_at, reason)``; units without a failure do not enter."""
+    failed = [u for u in units if u.events.failure is not None]
+    if failure_level is None:
+        return "interval", "no failure level given: failures are events (found failed), not a recorded level"
+    if not failed:
+        return "interval", "no failures"
+    lvl = float(failure_level)
+    tol = 1e-9 * max(abs(lvl), 1e-300)
+    for u in failed:
+        tf, rec = float(u.events.failure), u.failure_record
+        if rec is None or abs(rec[0] - tf) > 1e-9 * max(abs(tf), 1.0):
+            return "interval", (f"{u.unit}: no health-indicator record at its failure time {tf:g} (records must "
+                                f"run through the failure to show the level was reached then)")
+        ok = np.isfinite(u.y)
+        y0 = float(u.y[ok][0]) if ok.any() else rec[1]
+        sg = 1.0 if y0 < lvl else -1.0  # the side the unit starts on: reaching = passing to the other
+        if sg * (rec[1] - lvl) < -tol:
+            return "interval", (f"{u.unit}: its record at the failure time {tf:g} ({rec[1]:g}) has not reached the "
+                                f"failure level {lvl:g}")
+        if ok.any() and np.any(sg * (u.y[ok] - lvl) >= -tol):
+            return "interval", (f"{u.unit}: a record before its failure time {tf:g} already reached the failure "
+                                f"level {lvl:g}")
+    return "crossing", (f"all {len(failed)} failures are the first record at or past the failure level {lvl:g}: "
+                        "failure at a recorded crossing")
 
 
 def read_hi_csv(path: str | Path) -> list[UnitHistory]:
@@ -906,7 +962,7 @@ class LifeModel:
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
             seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
-            path: str = "power", failure_at: str = "interval") -> "LifeModel":
+            path: str = "power", failure_at: str = "interval", exposure_rate: str = "mean") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -918,7 +974,9 @@ class LifeModel:
         of being estimated from the gap between the last record and the unrecorded value at failure.
         ``n_draws`` posterior draws of the population parameters
         (:func:`_posterior_draws`; 0: point estimate only) carry the parameter uncertainty of a small fleet into
-        the prognosis.
+        the prognosis. ``exposure_rate``: how the prognosis extrapolates a unit's exposure to its failure
+        exposure, ``mean`` (default: cumulative exposure grows at the mean rate) or ``median`` (the default
+        before, kept for models saved without the key) per-step rate of its record (:meth:`UnitHistory.rate`).
 
         ``path``: the latent path family, ``power`` (``r (E/E_ref)^b``), ``paris`` (crack-growth shape
         ``h(r E/E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1``: Paris' law with dK ~ sqrt(a) integrated, per-unit
@@ -933,9 +991,19 @@ class LifeModel:
         ``failure_level``, the level in the model's coordinates is also fitted (one parameter more) and the
         lower AIC kept: where the path family's shape is wrong between the last records and the failure level
         (Virkler: no record between 39 mm and the 49.8 mm failure length), the path does not reach the defined
-        level at the failure times and a fixed level leaves that bias to the level's scatter s_Y."""
-        if failure_at not in ("interval", "crossing"):
-            raise ValueError(f"life-model fit: failure_at {failure_at!r} is not one of interval, crossing")
+        level at the failure times and a fixed level leaves that bias to the level's scatter s_Y. ``auto``: the
+        failure definition decides (:func:`failure_at_rule`: ``crossing`` when ``failure_level`` is given and every
+        failed unit's records run through its failure, the record at the failure time being the first at or past
+        the level; ``interval`` otherwise); the choice and its reason go to ``fit_info["failure_at_rule"]``."""
+        if exposure_rate not in ("median", "mean"):
+            raise ValueError(f"life-model fit: exposure_rate {exposure_rate!r} is not one of median, mean")
+        rule = None
+        if failure_at == "auto":  # from the failure definition (level + records), never from a score
+            failure_at, rule = failure_at_rule(units, failure_level)
+            if failure_at == "crossing" and threshold == "latent":
+                failure_at, rule = "interval", rule + "; but the latent threshold was asked for: interval"
+        if failure_at not in FAILURE_AT:
+            raise ValueError(f"life-model fit: failure_at {failure_at!r} is not one of interval, crossing, auto")
         if failure_at == "crossing" and threshold == "latent":
             raise ValueError("life-model fit: failure_at='crossing' needs the observable threshold (failure defined "
                              "on the measured HI)")
@@ -1168,6 +1236,11 @@ class LifeModel:
             info["failure_level"] = float(failure_level)
         if crossing:
             info["failure_at"] = "crossing"
+        if rule is not None:
+            info["failure_at_rule"] = rule
+        # the prognosis's rate of a unit's future exposure (UnitHistory.rate); a model saved without it (before
+        # the mean became the default) keeps the median it was scored with
+        info["exposure_rate"] = exposure_rate
         if level_aic is not None:
             info["level_aic"] = level_aic[fam]
             info["level"] = "fitted" if F.get("free_level") else "fixed"
@@ -1229,7 +1302,7 @@ class LifeModel:
         """RUL in the unit's time axis for posterior samples ``z`` at time ``t_k`` (alive at ``t_k``);
         ``h``: ``u.truncated(t_k)`` when the caller has it already."""
         h = u.truncated(t_k) if h is None else h
-        rate = h.rate()
+        rate = h.rate(self.fit_info.get("exposure_rate", "median"))
         if not (np.isfinite(rate) and rate > 0):
             rate = float(self.fit_info.get("rate_median", 1.0))
         if self.threshold == "observable":

@@ -283,15 +283,18 @@ def battery_records(data_dir: str | Path, out_dir: str | Path, cells=("B0005", "
 
 
 def virkler_records(data_dir: str | Path, out_dir: str | Path) -> tuple[Path, Path]:
-    """Write ``virkler_hi.csv`` (unit,time,hi = specimen, cycles, crack length m; records before failure)
-    and ``virkler_events.csv`` (failure at the cycle count of the last recorded length, 49.8 mm)."""
+    """Write ``virkler_hi.csv`` (unit,time,hi = specimen, cycles, crack length m; records through the failure:
+    the measured 49.8 mm at the failure count is the last row, as the measured capacity at the failure cycle is
+    in ``battery_records``'s file; a fit drops records at or after the failure and
+    :func:`hd_prognostic.lifemodel.failure_at_rule` reads it as a recorded crossing) and ``virkler_events.csv``
+    (failure at the cycle count of the last recorded length, 49.8 mm)."""
     from hd_prognostic.lifemodel import UnitEvents, UnitHistory, write_events, write_hi_csv
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     units, ev = [], {}
     for s in load_virkler(data_dir):
-        sel = s.N < s.N_fail
+        sel = s.N <= s.N_fail
         units.append(UnitHistory(f"specimen{s.sid}", s.N[sel], s.a[sel], s.N[sel].copy()))
         ev[f"specimen{s.sid}"] = UnitEvents(failure=float(s.N_fail))
     write_hi_csv(out / "virkler_hi.csv", units)

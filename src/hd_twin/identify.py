@@ -29,6 +29,8 @@ Public API (used by ``hd_twin`` and ``hd_ground.discovery``; never imports
 * :func:`vp_shape` -- least-squares refinement of a shape on the cross-validated residuals, with its
   block-robust sandwich uncertainty and a weak-identification flag -> :class:`ShapeVP`.
 * :func:`presliding_state` -- the rate-independent (Dahl / LuGre bristle) friction or hysteresis state.
+* :func:`hysteresis_state` -- the normalised Bouc-Wen state of a displacement, loop shape (n, phi) free
+  (Dahl is n = 1, phi = 1).
 * :func:`identify_torque_balance` -- the motor-side torque balance -> :class:`Identified`.
 """
 
@@ -481,10 +483,12 @@ def cv_residuals(y: np.ndarray, X: np.ndarray, block: np.ndarray) -> np.ndarray:
     scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
     Xs = X / scale
     blocks, inv = np.unique(block, return_inverse=True)
-    G = np.zeros((len(blocks), X.shape[1], X.shape[1]))
-    g = np.zeros((len(blocks), X.shape[1]))
-    np.add.at(G, inv, Xs[:, :, None] * Xs[:, None, :])
-    np.add.at(g, inv, Xs * y[:, None])
+    # per-block sums of the products (rows grouped by block: reduceat over the sorted order)
+    order = np.argsort(inv, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(inv[order]) != 0])
+    Xo = Xs[order]
+    G = np.add.reduceat(Xo[:, :, None] * Xo[:, None, :], starts, axis=0)
+    g = np.add.reduceat(Xo * y[order][:, None], starts, axis=0)
     Gt, gt = G.sum(0), g.sum(0)
     p = X.shape[1]
     lam = 1e-10 * np.trace(Gt) / max(p, 1)
@@ -625,6 +629,122 @@ def presliding_state(x: np.ndarray, distance: float, segment: np.ndarray | None 
                 z = r + (z - r) * decay[i]
         o[i] = z
     out[:] = o
+    return out
+
+
+#: Search ranges of the Bouc-Wen loop shape (:func:`hysteresis_state`): the sharpness exponent n and the unloading
+#: parameter phi = (beta - gamma) / (beta + gamma). phi >= 0 is Bouc-Wen's passivity condition (beta >= |gamma|);
+#: the range reaches below it so that a loop with linear unloading (phi = 0, beta = gamma) is inside, not on a bound.
+BW_N_RANGE = (0.4, 5.0)
+BW_PHI_RANGE = (-0.6, 3.0)
+
+
+@functools.lru_cache(maxsize=64)
+def _bw_flow(n: float, phi: float, n_grid: int = 20001) -> tuple[np.ndarray, np.ndarray]:
+    """Flow of the normalised Bouc-Wen state under increasing displacement: (u, s) on a grid, s(0) = -1.
+
+    ds/du = 1 - |s|^n for s >= 0 (loading) and 1 + phi |s|^n for s < 0 (unloading), u the travel in units of the
+    distance. Autonomous, so a state s0 moved by a travel du is S(U(s0) + du) with U the inverse of S. U is the
+    quadrature of 1 / (ds/du) (cumulative trapezoid): on a uniform grid of s in [-1, 0], and in t = -ln(1 - s) on
+    [0, 1), where the integrand e^-t / (1 - (1 - e^-t)^n) stays bounded (-> 1/n) up to 1 - s = e^-28.
+    """
+    s1 = np.linspace(-1.0, 0.0, n_grid)
+    f1 = 1.0 / (1.0 + phi * np.abs(s1) ** n)
+    u1 = np.r_[0.0, np.cumsum(0.5 * (f1[1:] + f1[:-1]) * np.diff(s1))]
+    t = np.linspace(0.0, 28.0, n_grid)
+    e = np.exp(-t)
+    s2 = 1.0 - e
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f2 = e / (1.0 - s2**n)
+    f2[0] = 1.0  # s = 0: ds/du = 1
+    u2 = u1[-1] + np.r_[0.0, np.cumsum(0.5 * (f2[1:] + f2[:-1]) * np.diff(t))]
+    u, st = np.r_[u1, u2[1:]], np.r_[s1, s2[1:]]
+    keep = np.r_[True, (np.diff(st) > 0) & (np.diff(u) > 0)]
+    return u[keep], st[keep]
+
+
+@functools.lru_cache(maxsize=64)
+def _bw_tables(n: float, phi: float, m: int = 50001) -> tuple[list, list, float, float]:
+    """Uniform-grid tables of the flow (U on s in [-1, 1], S on u in [0, u_max]) for the sequential loop."""
+    u_t, s_t = _bw_flow(n, phi)
+    s_g = np.linspace(-1.0, 1.0, m)
+    u_g = np.linspace(0.0, float(u_t[-1]), m)
+    U = np.interp(s_g, s_t, u_t)  # beyond the table's last state (within 1e-12 of 1): its travel
+    S = np.interp(u_g, u_t, s_t)
+    return U.tolist(), S.tolist(), (m - 1) / 2.0, (m - 1) / float(u_t[-1])
+
+
+def hysteresis_state(x: np.ndarray, distance: float, n: float = 1.0, phi: float = 1.0,
+                     segment: np.ndarray | None = None) -> np.ndarray:
+    """Normalised Bouc-Wen hysteresis state s in [-1, 1] driven by the displacement ``x`` (time-ordered samples).
+
+    Bouc-Wen, z' = A x' - beta |x'| |z|^(n-1) z - gamma x' |z|^n, normalised by its saturation z_max =
+    (A / (beta + gamma))^(1/n) and with travel measured in d = z_max / A (``distance``, unit of x):
+    ds/dx = [1 - |s|^n] / d while |s| grows (loading) and [1 + phi |s|^n] / d while it shrinks (unloading), phi =
+    (beta - gamma) / (beta + gamma). The loop's shape is (n, phi): n the sharpness of the yield, phi how the state
+    leaves saturation after a reversal (phi = 1: exponentially, Dahl / LuGre's bristle state, identical to
+    :func:`presliding_state` at n = 1; phi = 0: linearly, beta = gamma; phi > 1: faster). Rate independent and
+    exact for piecewise-monotone x between samples: within a monotone run the state is the flow map of the travel
+    since the run began (:func:`_bw_flow`, tabulated once per shape), so only the reversals are a sequential loop.
+    Restarts at 0 at each new ``segment``. Requires ``distance`` > 0, n > 0, phi > -1.
+    """
+    x = np.asarray(x, float)
+    n_s = len(x)
+    out = np.zeros(n_s)
+    d = float(distance)
+    if not d > 0 or not n > 0 or not phi > -1:
+        raise IdentifyError(f"hysteresis_state: need distance > 0, n > 0, phi > -1 (got {distance}, {n}, {phi})")
+    if n_s == 0:
+        return out
+    seg = np.zeros(n_s, int) if segment is None else np.asarray(segment)
+    dx = np.diff(x, prepend=x[0])
+    start = np.r_[True, seg[1:] != seg[:-1]]
+    dx[start] = 0.0
+    dx[~np.isfinite(dx)] = 0.0
+    mv = np.flatnonzero(dx != 0)  # the samples that move the state
+    if len(mv) == 0:
+        return out
+    r = np.sign(dx[mv])
+    sg = seg[mv]
+    new_run = np.r_[True, (r[1:] != r[:-1]) | (sg[1:] != sg[:-1])]
+    run = np.cumsum(new_run) - 1
+    first = np.flatnonzero(new_run)
+    trav = np.abs(dx[mv]) / d
+    cs = np.cumsum(trav)
+    base = (cs - trav)[first]  # travel before each run
+    cum = cs - base[run]  # travel since the run began (inclusive)
+    total = np.r_[cum[first[1:] - 1], cum[-1]]
+    u_t, s_t = _bw_flow(float(n), float(phi))
+    Ug, Sg, inv_ds, inv_du = _bw_tables(float(n), float(phi))
+    mU, mS = len(Ug) - 1, len(Sg) - 1
+    u_last, s_last = Ug[-1], Sg[-1]
+    rr, tot = r[first].tolist(), total.tolist()
+    reset = np.r_[True, sg[first][1:] != sg[first][:-1]].tolist()
+    u0 = [0.0] * len(first)
+    s_prev = 0.0
+    for k in range(len(first)):  # the one sequential part: the state each run starts from
+        if reset[k]:  # a new segment: no travel history there
+            s_prev = 0.0
+        rk = rr[k]
+        p = (rk * s_prev + 1.0) * inv_ds
+        j = int(p)
+        u = u_last if j >= mU else Ug[j] + (p - j) * (Ug[j + 1] - Ug[j])
+        u0[k] = u
+        q = (u + tot[k]) * inv_du
+        j = int(q)
+        s_prev = rk * (s_last if j >= mS else Sg[j] + (q - j) * (Sg[j + 1] - Sg[j]))
+    u0 = np.asarray(u0)
+    vals = r * np.interp(u0[run] + cum, u_t, s_t)
+    # hold the state between moves; 0 before the first move of a segment
+    last = np.full(n_s, -1)
+    last[mv] = np.arange(len(mv))
+    last = np.maximum.accumulate(last)
+    ok = last >= 0
+    held = np.zeros(n_s)
+    held[ok] = vals[last[ok]]
+    same = np.zeros(n_s, bool)
+    same[ok] = seg[mv[last[ok]]] == seg[ok]
+    out[same] = held[same]
     return out
 
 

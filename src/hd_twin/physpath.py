@@ -92,6 +92,16 @@ class PhysicsPath:
             raise ValueError(f"identified physics path returned shape {q.shape} for {sig['t'].shape} samples")
         return q
 
+    def predict_signals(self, sig: dict) -> np.ndarray:
+        """Q_phys [N*m] on a signal dict that carries its derivative (``alpha_m``, when the balance has that
+        column): the streaming twin's FIR derivative (:mod:`hd_twin.streamfir`); the columns are pointwise."""
+        if not self.active:
+            return np.zeros(len(sig["t"]))
+        q = np.asarray(self.identified.predict(sig), dtype=np.float64)
+        if q.shape != sig["t"].shape:
+            raise ValueError(f"identified physics path returned shape {q.shape} for {sig['t'].shape} samples")
+        return q
+
     def predict_segment(self, seg) -> np.ndarray:
         """Q_phys [N*m] on one segment (zeros when inactive)."""
         if not self.active:

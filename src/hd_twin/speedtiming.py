@@ -174,8 +174,10 @@ class SpeedTiming:
             X[:, j] = retime_speed(X[:, j], t, seg, tau, self.window_s)
         return X
 
-    def streamer(self, fs: float) -> "CausalRetimer":
-        return CausalRetimer(self, fs)
+    def streamer(self, fs: float, fixed_lag: bool = False) -> "CausalRetimer | CentredRetimer":
+        """The streaming re-timing at ``fs`` [Hz]: causal (no delay), or ``fixed_lag`` (the batch derivative,
+        each row given out half a window later: :class:`CentredRetimer`)."""
+        return CentredRetimer(self, fs) if fixed_lag else CausalRetimer(self, fs)
 
 
 class CausalRetimer:
@@ -222,3 +224,67 @@ class CausalRetimer:
             X[:, j] = np.where(np.isfinite(d), retime_value(x, d, tau), x)
             self.hist[j] = buf[-(self.w - 1):]
         return X
+
+
+@functools.lru_cache(maxsize=64)
+def _sg2_weights(w: int, dt_key: str):
+    """Quadratic Savitzky-Golay first-derivative weights of :func:`sg2_derivative` (centre and edge rows)."""
+    from scipy.signal import savgol_coeffs
+
+    from .streamfir import FIRWeights  # noqa: PLC0415
+
+    dt = float(dt_key)
+    m = w // 2
+    rows = [savgol_coeffs(w, 2, deriv=1, delta=dt, pos=k, use="dot") for k in range(w)]
+    return FIRWeights(rows[m], np.array(rows[:m]), np.array(rows[w - m:]), dt)
+
+
+class CentredRetimer:
+    """Fixed-lag streaming re-timing equal to the batch one (:meth:`SpeedTiming.apply_X` on the segment):
+    the centred quadratic fit of :func:`sg2_derivative` with its edge rows, each row given out ``lag`` rows
+    after it came in (the first ones once ``w + 1`` rows are in); :meth:`flush` gives out the rest at the
+    end of a segment. Rows must be finite (the streaming twin holds non-finite inputs before this)."""
+
+    def __init__(self, timing: SpeedTiming, fs: float):
+        from .streamfir import CentredFIR, gradient_weights  # noqa: PLC0415
+
+        if not (fs > 0 and math.isfinite(fs)):
+            raise ValueError(f"speed re-timing: sample rate must be a positive number, got {fs!r}")
+        self.timing = timing
+        self.dt = 1.0 / float(fs)
+        w = _window(self.dt, timing.window_s)
+        wt = _sg2_weights(w, f"{self.dt:.12g}") if w >= 5 else gradient_weights(self.dt)
+        self.cols = [(SPEED_COLUMNS[k], tau) for k, (tau, _) in timing.lags.items()]
+        self.fir = CentredFIR(wt)
+        self.reset()
+
+    @property
+    def lag(self) -> int:
+        """Rows between a row's arrival and its re-timed value (after the first window)."""
+        return self.fir.lag if self.cols else 0
+
+    def reset(self) -> None:
+        self.fir.reset()
+        self.rows = np.zeros((0, 0))
+
+    def _emit(self, d: np.ndarray) -> np.ndarray:
+        k = len(d)
+        out, self.rows = self.rows[:k].copy(), self.rows[k:]
+        for i, (j, tau) in enumerate(self.cols):
+            di = d[:, i]
+            out[:, j] = np.where(np.isfinite(di), retime_value(out[:, j], di, tau), out[:, j])
+        return out
+
+    def step(self, X: np.ndarray) -> np.ndarray:
+        """Rows ``X[n, 7]`` in -> the re-timed rows that became known (oldest first, possibly none)."""
+        X = np.asarray(X, dtype=np.float64)
+        if not self.cols:
+            return X
+        self.rows = X.copy() if len(self.rows) == 0 else np.vstack([self.rows, X])
+        return self._emit(self.fir.push(X[:, [j for j, _ in self.cols]]))
+
+    def flush(self) -> np.ndarray:
+        """The rows not given out yet (end of the segment: the fit of the last window)."""
+        if not self.cols or len(self.rows) == 0:
+            return np.zeros((0, self.rows.shape[1] if self.rows.ndim == 2 else 0))
+        return self._emit(self.fir.flush())

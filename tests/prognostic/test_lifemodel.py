@@ -118,7 +118,7 @@ def test_csv_path_fit_prognose_metrics(tmp_path):
     write_events(tmp_path / "ev.csv", {u.unit: u.events for u in units})
     write_hi_csv(tmp_path / "held.csv", [held])
     assert hdphm(["prognostic", "fit", str(tmp_path / "hi.csv"), "--events", str(tmp_path / "ev.csv"),
-                  "--out", str(tmp_path / "m.json")]) == 0
+                  "--out", str(tmp_path / "m.json"), "--path", "power"]) == 0  # the CSV plumbing, quick path family
     m = LifeModel.from_json(tmp_path / "m.json")
     assert m.fit_info["n_units"] == 7 and m.exposure == "csv exposure"
     assert hdphm(["prognose", str(tmp_path / "held.csv"), "--model", str(tmp_path / "m.json"),

@@ -24,7 +24,7 @@ def fleets(small_fleet_dir, tmp_path_factory):
 
 def _run(fleet, ev, ids, out):
     assert hdphm(["prognostic", "fit", str(fleet), "--events", str(ev), "--out", str(out / "m.json"),
-                  "--exposure", "load"]) == 0
+                  "--exposure", "load", "--path", "power"]) == 0  # plumbing test: the quick path family
     assert hdphm(["prognose", str(fleet / ids[2]), "--model", str(out / "m.json"), "--out", str(out / "p"),
                   "--samples", "200", "--no-plots"]) == 0
     return json.loads((out / "m.json").read_text()), json.loads((out / "p" / "rul_history.json").read_text())

@@ -145,6 +145,9 @@ def test_battery_export_runs_through_the_life_model(tmp_path):
         assert e.failure == u.t[k]
     assert hdphm(["prognostic", "fit", str(tmp_path / "battery_hi.csv"), "--events", str(tmp_path / "battery_events.csv"),
                   "--out", str(tmp_path / "m.json")]) == 0
+    fi = json.loads((tmp_path / "m.json").read_text())["fit_info"]  # the CLI defaults: both path families by AIC,
+    assert set(fi["path_aic"]) == {"power", "paris"}  # and without --failure-level the failures are found-failed events
+    assert "failure_at" not in fi and fi["failure_at_rule"].startswith("no failure level")
     assert hdphm(["prognose", str(tmp_path / "battery_hi.csv"), "--unit", "B0006", "--model", str(tmp_path / "m.json"),
                   "--out", str(tmp_path / "p"), "--samples", "200", "--no-plots"]) == 0
     assert json.loads((tmp_path / "p" / "rul_history.json").read_text())["unit"] == "B0006"

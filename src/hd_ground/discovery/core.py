@@ -32,12 +32,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hd_twin.identify import Shape, fit_separable, presliding_state, vp_shape
+from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_state, vp_shape
 from hd_twin.terms import basis_matrix, evaluate_terms
 
 from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
                       state_var)
+from .loopshape import refine_loop_shape, twist_state_of
 from .spectrum import OrderSpectrum, analyse_orders
 
 #: Effects the basic twin declares for each target when no twin config is given.
@@ -61,11 +62,15 @@ class StateSignals(dict):
         if not (isinstance(key, str) and key.startswith(STATE_PREFIX)):
             raise KeyError(key)
         full, segment, cache = self._source
-        _, var, dist = key.split(":", 2)
+        parts = key.split(":")
         if key not in cache:
             if len(cache) >= 24:  # shape searches visit many distances: keep the latest few
                 cache.pop(next(iter(cache)))
-            cache[key] = presliding_state(full[var], float(dist), segment)
+            if len(parts) == 5:  # a Bouc-Wen loop state (loopshape.loop_state_var): distance, n, phi
+                cache[key] = hysteresis_state(full[parts[1]], float(parts[2]), float(parts[3]), float(parts[4]),
+                                              segment)
+            else:
+                cache[key] = presliding_state(full[parts[1]], float(parts[2]), segment)
         return cache[key][self._rows]
 
     def rows_of(self, idx) -> "StateSignals":
@@ -124,6 +129,9 @@ def static_term(term: dict, eps_omega: float | None) -> dict | None:
 @dataclass
 class Options:
     min_gain: float = 0.02  # minimum relative drop of the CV error for adding a group
+    # an effect stays only if removing it raises the held-out error by this many paired standard errors
+    # (heldout_gain_z: squared residuals on the same held-out rows, contiguous chunks)
+    heldout_z: float = 1.0
     fold_majority: float = 0.6  # fraction of folds in which the group must help
     se_rule: float = 0.0  # the CV gain must exceed this many standard errors of its per-fold gains (0: off)
     wald_sigmas: float = 3.0  # a group's coefficients must be this many jackknife standard errors from zero
@@ -935,6 +943,12 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
 
     confirmed: dict[int, tuple] = {}
 
+    def _relink(gi):
+        cand, cix = groups[gi]
+        M = basis_matrix(cand.basis, sig)
+        X_all[:, cix] = M
+        gram.update_columns(cix, M[fit])
+
     def confirm(gi, cur_idx):
         """CV profile + block jackknife of the shape given ``cur_idx``: (identified, notes)."""
         key = tuple(sorted(cur_idx))
@@ -952,9 +966,17 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     # again without its family: a group that is not identified must not have steered which others entered
     closed: set[str] = set()
     trace = []
-    for _pass in range(3):
+    loop_done = False
+    for _pass in range(4):
         sel, tr = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm, closed=closed)
         trace += tr
+        if not loop_done:
+            # 4a. the selected hysteresis loop's shape (loopshape: Bouc-Wen family, Dahl inside); when it
+            # replaces the Dahl loop, the selection is made again with it (once)
+            loop_done = True
+            if _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, ds.block, opt, statements, trace,
+                             _apply_basis=lambda gi: (_relink(gi), confirmed.pop(gi, None))):
+                continue
         dropped = []
         for gi in list(sel):
             cand, cix = groups[gi]
@@ -968,7 +990,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 trace.append({"step": "drop (shape unidentified)", "candidate": f"{cand.name}[{cand.family}]",
                               "note": note})
                 statements.append(f"{cand.name}: its shape is not identified in the final model ({note}); left out")
-        if not dropped or _pass == 2:
+        if not dropped or _pass == 3:
             break
         closed |= set(dropped)
         trace.append({"step": "reselect", "closed": sorted(closed)})
@@ -1042,17 +1064,21 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             sse1 = float(np.sum((y - X_eval[:, ix1] @ b1)[score] ** 2))
             ix0 = _model(base_idx, groups, [gj for gj in sel if gj != gi])
             b0 = _lstsq(X_all[fit][:, ix0], y[fit])
-            sse0 = float(np.sum((y - X_eval[:, ix0] @ b0)[score] ** 2))
+            r0 = (y - X_eval[:, ix0] @ b0)[score]
+            sse0 = float(np.sum(r0**2))
             effects.append({"name": t["name"], "variable": t["variable"], "order": t["order"], "form": t["form"],
                             "parameters": t["parameters"], "explained": (sse_b - sse1) / sse_b if sse_b > 0 else 0.0,
-                            "contribution": (sse0 - sse_full) / sse_b if sse_b > 0 else 0.0, "signal": target})
+                            "contribution": (sse0 - sse_full) / sse_b if sse_b > 0 else 0.0, "signal": target,
+                            "contribution_z": heldout_gain_z(r0, r_after[score])})
         order = np.argsort([-e["contribution"] for e in effects]) if effects else []
         effects = [effects[i] for i in order]
         sel_sorted = [sel[i] for i in order]
         # the held-out data decide: an effect whose removal from the final model does not raise the held-out
         # error (after the offset step, where there is one) is not an effect; the least useful one leaves the
         # model, the rest are refitted, and the test is repeated
-        bad = [(e["contribution"], gi, e) for gi, e in zip(sel_sorted, effects) if e["contribution"] <= 0]
+        # (a held-out gain within one standard error of its own sampling noise is no evidence either)
+        bad = [(e["contribution"], gi, e) for gi, e in zip(sel_sorted, effects)
+               if e["contribution"] <= 0 or e["contribution_z"] < opt.heldout_z]
         if not bad:
             break
         _, gi, e = min(bad, key=lambda b: b[0])
@@ -1060,8 +1086,9 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         trace.append({"step": "drop (no held-out gain)", "candidate": f"{cand.name}[{cand.family}]",
                       "explained": e["explained"], "contribution": e["contribution"]})
         statements.append(f"{cand.name} ({cand.variable}, order {cand.order}) lowered the cross-validated error on the "
-                          f"fit blocks but not the held-out error (held-out contribution {e['contribution']:+.1%}, "
-                          f"alone {e['explained']:+.1%}): not an effect")
+                          f"fit blocks but not the held-out error beyond its noise (held-out contribution "
+                          f"{e['contribution']:+.1%}, {e['contribution_z']:.1f} paired SE; alone {e['explained']:+.1%}): "
+                          "not an effect")
         sel = [g for g in sel if g != gi]
     terms = [terms[i] for i in order]
     declared_after = list(declared)
@@ -1107,6 +1134,45 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         offsets=offsets, comparisons=comp, plot=plot, cv_folds=cv_folds,
     )
 
+
+
+def heldout_gain_z(r_without: np.ndarray, r_with: np.ndarray, n_chunks: int = 20) -> float:
+    """How many standard errors a term lowers the held-out mean squared error: d = r_without^2 - r_with^2 on the
+    same held-out rows (time order), averaged over ``n_chunks`` contiguous chunks (neighbouring samples are
+    correlated), mean / (sd / sqrt(n_chunks)). 1e9 (JSON-safe infinity) when every chunk gains alike or there
+    are too few rows to tell and the term gains; 0 when it does not gain."""
+    d = np.asarray(r_without, float) ** 2 - np.asarray(r_with, float) ** 2
+    if len(d) < 2 * n_chunks:
+        return 1e9 if d.sum() > 0 else 0.0
+    m = np.array([c.mean() for c in np.array_split(d, n_chunks)])
+    se = float(np.std(m, ddof=1) / np.sqrt(n_chunks))
+    if se <= 0:
+        return 1e9 if m.mean() > 0 else 0.0
+    return float(m.mean() / se)
+
+
+def _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, statements, trace, _apply_basis) -> bool:
+    """The loop shape of every selected twist-hysteresis group, given the other selected groups
+    (``loopshape.refine_loop_shape``); True when one replaced its Dahl loop (its columns are then rebuilt)."""
+    changed = False
+    for gi in sel:
+        cand, cix = groups[gi]
+        if twist_state_of(cand) is None:
+            continue
+        others = [c for c in _model(base_idx, groups, [gj for gj in sel if gj != gi]) if c not in cand.replace_idx]
+        Xc = X_all[srows][:, others]
+
+        def design_of(make_basis, Xc=Xc):
+            return lambda sh: np.column_stack([Xc, basis_matrix(make_basis(sh), s_rows)])
+
+        ok_, st = refine_loop_shape(cand, design_of, y[srows], block[srows], opt.min_gain)
+        statements += st
+        if ok_:
+            _apply_basis(gi)
+            trace.append({"step": "loop shape", "candidate": f"{cand.name}[{cand.family}]",
+                          "n_h": cand.nonlinear["n_h"], "phi_h": cand.nonlinear["phi_h"]})
+            changed = True
+    return changed
 
 
 def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray, omega: np.ndarray | None = None,
