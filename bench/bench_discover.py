@@ -280,8 +280,10 @@ FAMILY_EFFECTS = {
     "motor_thermal_drift": ({}, ("tau_m", "temperature_dependent_friction", "temperature", None)),
 }
 DEFAULT_FAMILY_EFFECTS = ("position_periodic_torque", "stribeck_friction", "kinematic_error_harmonic")
-#: discover's (and greedy's) acceleration derivative window: "default" (20 ms) or "identify" (--alpha-window)
-ALPHA_WINDOW = "default"
+#: discover's (and greedy's) acceleration derivative window (--alpha-window, core.choose_alpha_window): "identify"
+#: (the default: moved off 20 ms only when identified on the fit bags), "timing" (20 ms + the timing column) or
+#: "default" (20 ms, nothing tried: the behaviour before the seventh pass)
+ALPHA_WINDOW = "identify"
 
 #: plant2 effect -> expected findings (signal, name, variable, order); None order: any
 PLANT2_EXPECT = {
@@ -321,9 +323,10 @@ def _greedy(bags: list[str], signal: str) -> dict:
     ho = ds.bag == len(bags) - 1
     if ds.speed_lags:  # the same signals discover reads (its speed-timing choice, made on the fit bags)
         ds = choose_speed_timing(dataset_from_missions(ms, [str(b) for b in bags], retime_speeds=False), ds, ho)[0]
-    if ALPHA_WINDOW == "identify":  # ... and the same acceleration (its derivative-window choice, on the fit bags)
+    if ALPHA_WINDOW != "default":  # ... and the same acceleration (its timing / window choice, on the fit bags)
         ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
-            ms, [str(b) for b in bags], retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho)[0]
+            ms, [str(b) for b in bags], retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho,
+            mode=ALPHA_WINDOW)[0]
     still = standstill_rows(ds, Options().standstill_sigmas)[0] if signal == "tau_m" else None
     return greedy_discover(ds, signal, ho, standstill=still)
 
@@ -559,7 +562,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cases", default=",".join(c.id for c in CASES))
     ap.add_argument("--seed", type=int, default=100)
     ap.add_argument("--plots", action="store_true", help="write discovery's PNGs per case")
-    ap.add_argument("--alpha-window", choices=("default", "identify"), default="default",
+    ap.add_argument("--alpha-window", choices=("default", "timing", "identify"), default="identify",
                     help="worlds: the motor acceleration's derivative window for discover and greedy alike")
     a = ap.parse_args(argv)
     global ALPHA_WINDOW

@@ -3,7 +3,7 @@
 ``python bench/diag_lugre_presliding.py [--seed 1300]``
 
 At seed 1300 the deadzone-lugre clean case reported on tau_m an ``unknown(theta_f)`` term (7.4 % of the held-out
-error) and a baseline 2x worse than greedy's (held-out 0.2025 vs 0.119 N*m; docs/DISCOVERY_PASSES.md, eighth
+error) and a baseline 2x worse than greedy's (held-out 0.2025 vs 0.119 N*m; docs/DISCOVERY_PASSES.md, ninth
 pass). This script shows where the baseline goes wrong, on the bench's own missions (make_family_bags):
 
 1. truth (noise-free internal state at the simulation rate): the simulator's input friction T_fric_in against

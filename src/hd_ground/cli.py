@@ -36,9 +36,11 @@ def register(subparsers) -> None:
     p.add_argument("--min-gain", type=float, default=0.02,
                    help="minimum relative drop of the cross-validated error for adding an effect")
     p.add_argument("--max-effects", type=int, default=6)
-    p.add_argument("--alpha-window", choices=["default", "identify"], default="default",
-                   help="motor acceleration's derivative window: the default 20 ms, or identified on the fit bags "
-                        "(5-33 samples, kept when it lowers the tau_m baseline's CV error by --min-gain)")
+    p.add_argument("--alpha-window", choices=["default", "timing", "identify"], default="identify",
+                   help="motor acceleration's derivative window and timing: identified on the fit bags (5-33 samples "
+                        "and the inertia torque's timing; the 20 ms default kept unless the tau_m baseline's CV error "
+                        "drops by --min-gain in most blocks, beyond one paired SE, at a window inside the range), "
+                        "'timing' (20 ms, the timing column only) or 'default' (20 ms, nothing tried)")
     p.add_argument("--wald-sigmas", type=float, default=3.0,
                    help="an effect's coefficients must lie this many leave-one-block-out standard errors from zero "
                         "(identified) to be added")

@@ -33,6 +33,18 @@ CASES = [
 ]
 
 
+#: Cases where the paired held-out check cannot separate discover from greedy's held-out luck; the other assertions
+#: still hold and the check runs (a pass passes). smooth-cubic position-periodic torque on these bags (seed 0), with
+#: the identified acceleration window (5 ms + timing): discover's friction width 1.16 +- 0.03 rad/s against the
+#: simulator's 1.077 (the 20 ms window gave 1.48 +- 0.16), held-out 0.1388 N*m (0.1407 with 20 ms), greedy on the same
+#: signals 0.1382 at its grid width 0.922; the simulator's own width with least-squares coefficients and the same
+#: terms scores 0.13837, z +6.8 against greedy: within one held-out bag a wrong width can win by 0.1-0.4 %
+#: systematically (README, discovery section; docs/DISCOVERY_PASSES.md, seventh pass).
+HELDOUT_BAG_LUCK = {
+    ("smooth-cubic", "position_periodic_torque"): "held-out bag favours greedy's grid width over the true one",
+}
+
+
 @pytest.fixture(scope="module")
 def family_bags(tmp_path_factory):
     """Bags of a family case with the bench's effect amplitudes and acquisition (4 missions x 4 s), cached."""
@@ -70,6 +82,8 @@ def test_hidden_effect_named_and_no_worse_than_greedy(world, effect, family_bags
     # over 20 contiguous chunks: at the noise floor greedy's held-out-selected extra term buys it < 1 %)
     z = r["paired_z"]
     assert z is not None, "discover and greedy were not scored on the same held-out rows"
+    if (world, effect) in HELDOUT_BAG_LUCK and not (r["after"] <= r["greedy_after"] or z < 2.0):
+        pytest.xfail(HELDOUT_BAG_LUCK[world, effect] + f" (now {r['after']:.5g} vs {r['greedy_after']:.5g}, z {z:+.1f})")
     assert r["after"] <= r["greedy_after"] or z < 2.0, (r["after"], r["greedy_after"], z)
 
 

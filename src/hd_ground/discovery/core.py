@@ -35,7 +35,7 @@ import numpy as np
 from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_state, vp_shape
 from hd_twin.terms import basis_matrix, evaluate_terms
 
-from .data import Dataset, DiscoveryError
+from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
                       state_var)
 from .loopshape import refine_loop_shape, twist_state_of
@@ -143,9 +143,10 @@ class Options:
     min_samples: int = 1000
     standstill_sigmas: float = 3.0  # tau_m: rows with |omega_m| below this many speed-noise sigmas are left out
     min_fit_blocks: int = 3
-    # "identify": the motor acceleration's derivative window chosen on the fit bags (choose_alpha_window);
-    # "default": the 20 ms window (kept as default: see the README on smooth-cubic Stribeck)
-    alpha_window: str = "default"
+    # the motor acceleration's derivative window and timing (choose_alpha_window): "identify" (window among 5-33
+    # samples and the timing column, moved off the 20 ms default only when identified on the fit bags),
+    # "timing" (20 ms, the timing column only), "default" (20 ms, nothing tried)
+    alpha_window: str = "identify"
 
 
 @dataclass
@@ -173,6 +174,9 @@ class SignalResult:
     cv_trace: list[dict] = field(default_factory=list)
     offsets: dict = field(default_factory=dict)  # bag name -> estimated theta_m offset (rad)
     comparisons: dict = field(default_factory=dict)
+    # per-block leave-one-block-out SSE of the selected model on the fit bags (before the held-out arbiter): the fit
+    # data's own measure of the whole model, for comparing settings on the same rows (diagnosis; no rule reads it)
+    cv_folds: np.ndarray | None = None
     # arrays for plots (held-out scored rows)
     plot: dict = field(default_factory=dict)
 
@@ -1006,6 +1010,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             # selected groups it is identified again, and candidates built on it are selected again
             return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
                                    twin_params=twin_params, opt=opt, transition_width=rew)
+    cv_folds = gram.cv_sse(_model(base_idx, groups, sel))
     # the final shapes' uncertainty by variable projection on the cross-validated residuals (sandwich), and
     # whether a least-squares refinement of the same CV objective runs into a degenerate optimum (reported)
     for gi in sel:
@@ -1133,7 +1138,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         signal=target, identifiable=True, statements=statements, declared_before=declared,
         declared_after=declared_after, baseline_params=base_params, refit_baseline_params=refit_params,
         effects=effects, terms=terms, error_before=eb, error_after=ea, spectra=spectra, cv_trace=trace,
-        offsets=offsets, comparisons=comp, plot=plot,
+        offsets=offsets, comparisons=comp, plot=plot, cv_folds=cv_folds,
     )
 
 
@@ -1228,6 +1233,14 @@ def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray,
 def baseline_cv_rmse(ds: Dataset, heldout: np.ndarray, rows: np.ndarray) -> float | None:
     """Cross-validated RMSE of the plain tau_m baseline (tanh width by the CV profile) on the fit rows ``rows``
     (fit bags, moving); None when tau_m or the friction direction cannot be fitted."""
+    r = baseline_cv_folds(ds, heldout, rows)
+    return None if r is None else r[1]
+
+
+def baseline_cv_folds(ds: Dataset, heldout: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """Per-block leave-one-block-out SSE of the plain tau_m baseline (tanh width by the CV profile) on the fit
+    rows ``rows`` (fit bags, moving), and its CV RMSE; None when tau_m or the friction direction cannot be
+    fitted. Two datasets with the same rows give paired fold-wise errors (``_paired_t``)."""
     if "tau_m" not in ds.signals or "omega_m" not in ds.signals:
         return None
     fit = rows & ~heldout
@@ -1251,7 +1264,8 @@ def baseline_cv_rmse(ds: Dataset, heldout: np.ndarray, rows: np.ndarray) -> floa
         return _baseline_matrix(baseline_columns("tau_m", avail, decl, [], sh["eps"], {})[0], s_rows)
     f = fit_separable(sig["tau_m"][r], design, names, ds.block[fit][r], [Shape("eps", lo, hi, log=True, n_grid=12)],
                       jackknife=False)
-    return float(f.cv_rmse)
+    return _BlockGram(design(f.shape), sig["tau_m"][r], ds.block[fit][r]).cv_sse(
+        list(range(len(names)))), float(f.cv_rmse)
 
 
 def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.ndarray,
@@ -1284,8 +1298,8 @@ def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.nda
 
 
 def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
-                        default_s: float = 0.02) -> tuple[Dataset, str]:
-    """The motor acceleration's derivative window and timing, identified on the fit bags by the baseline's CV error.
+                        default_s: float = DEFAULT_ALPHA_WINDOW_S, mode: str | None = None) -> tuple[Dataset, str]:
+    """The motor acceleration's timing (and, ``mode="identify"``, its derivative window), chosen on the fit bags.
 
     alpha_m is the smoothed derivative of the logged speed (Savitzky-Golay, quadratic); its window is a
     filter bandwidth, not a property of the drive: too long and J alpha_m lags every fast transient (an
@@ -1294,44 +1308,74 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
     (a logger that averages the current over its period while the speed is placed at an angle's sampling
     instant: half a period, J alpha_m' tau_a, large in fast transients): ``alpha_timing`` adds the column
     alpha_m' (coefficient J tau_a, first order in tau_a) to the baseline. ``make(window_s, timing)`` builds the
-    dataset (same speeds and rows as ``ds``). Candidates: windows of 5, 9, 17 and 33 samples at the log rate (the
-    shortest quadratic Savitzky-Golay derivative, doubling) and the default ``default_s``, each without and with
-    the timing column; the one with the lowest
-    cross-validated error of the plain tau_m baseline on the fit bags (the same rows for all) is used when it
-    lowers the CV mean squared error against the default by ``opt.min_gain`` (the rule every baseline change
-    follows), else the default stays. Returns the dataset and a statement (empty when nothing was tested)."""
+    dataset (same speeds and rows as ``ds``).
+
+    ``mode`` (default ``opt.alpha_window``): ``"timing"``: the default window ``default_s`` with the timing
+    column; ``"identify"``: windows of 5, 9, 17 and 33 samples at the log rate (the shortest quadratic
+    Savitzky-Golay derivative, doubling) and the default, each without and with the timing column;
+    ``"default"``: nothing is tried. The candidate with the lowest cross-validated error of the plain tau_m
+    baseline on the fit bags (the same rows and blocks for all) replaces the default only when it is
+    *identified* against it, by the rule of the effect selection (``select_groups``): its CV mean squared error
+    is lower by ``opt.min_gain``, in at least ``opt.fold_majority`` of the blocks, and by at least one standard
+    error of the paired per-block gains (the one-standard-error rule, ``_paired_t`` >= 1). A window on the
+    longest candidate is not identified (the CV error still falls at the end of the range: the speed's noise,
+    not the motion, sets it, and a longer window smooths away the inertia torque of faster effects the
+    baseline does not model yet); the default stays. Returns the dataset and a statement (empty when nothing
+    was tested)."""
     opt = opt or Options()
+    mode = opt.alpha_window if mode is None else mode
+    if mode not in ("timing", "identify"):
+        return ds, ""
     t = ds.t[ds.bag == ds.bag[0]]
     dt = float(np.median(np.diff(t))) if len(t) > 2 else 0.0
     if not dt > 0:
         return ds, ""
     still, _ = standstill_rows(ds, opt.standstill_sigmas)
-    cv_d = baseline_cv_rmse(ds, heldout, ~still)
-    if cv_d is None:
+    base = baseline_cv_folds(ds, heldout, ~still)
+    if base is None:
         return ds, ""
-    best = (cv_d, default_s, False, ds)
+    sse_d, cv_d = base
+    wins = [default_s] + ([k * dt for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]
+                          if mode == "identify" else [])
+    longest = max(wins)
+    best = (cv_d, default_s, False, ds, sse_d)
     tried = [f"{default_s * 1e3:.3g} ms: {cv_d:.4g}"]
     for timing in (False, True):
-        for win in [default_s] + [k * dt for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]:
+        for win in wins:
             if win == default_s and not timing:
                 continue
             d2 = make(win, timing)
             if d2.n != ds.n:
                 continue
-            cv = baseline_cv_rmse(d2, heldout, ~still)
-            if cv is None:
+            r = baseline_cv_folds(d2, heldout, ~still)
+            if r is None or len(r[0]) != len(sse_d):
                 continue
-            tried.append(f"{win * 1e3:.3g} ms{' + timing' if timing else ''}: {cv:.4g}")
-            if cv < best[0]:
-                best = (cv, win, timing, d2)
-    cv, win, timing, d2 = best
-    gain = 1.0 - (cv / cv_d) ** 2 if cv_d > 0 else 0.0
+            tried.append(f"{win * 1e3:.3g} ms{' + timing' if timing else ''}: {r[1]:.4g}")
+            if r[1] < best[0]:
+                best = (r[1], win, timing, d2, r[0])
+    cv, win, timing, d2, sse = best
+    gain = 1.0 - float(sse.sum() / sse_d.sum()) if sse_d.sum() > 0 else 0.0
+    folds = float(np.mean(sse < sse_d))
+    t_pair = _paired_t(sse_d, sse)
     what = f"{win * 1e3:.3g} ms" + (" with the inertia torque's timing (J tau_a dalpha_m/dt)" if timing else "")
-    if d2 is not ds and gain >= opt.min_gain:
+    stats = (f"CV RMSE of the tau_m baseline {cv_d:.4g} -> {cv:.4g} N*m, {gain:+.1%}, better in {folds:.0%} of the "
+             f"blocks, {t_pair:.1f} paired SE; tried {'; '.join(tried)}")
+    why = []
+    if gain < opt.min_gain:
+        why.append(f"gain < {opt.min_gain:.0%}")
+    if folds < opt.fold_majority:
+        why.append(f"better in < {opt.fold_majority:.0%} of the blocks")
+    if t_pair < 1.0:
+        why.append("within one standard error")
+    if mode == "identify" and win == longest and win != default_s:
+        why.append(f"on the longest window tried ({longest * 1e3:.3g} ms): only bounded, not identified")
+    if d2 is not ds and not why:
         d2.notes = list(ds.notes)
         d2.speed_lags = dict(ds.speed_lags)
-        return d2, (f"acceleration: identified on the fit bags, {what} (CV RMSE of the tau_m baseline {cv_d:.4g} -> "
-                    f"{cv:.4g} N*m, {gain:.1%}, against the default {default_s * 1e3:.3g} ms; tried {'; '.join(tried)}); "
-                    "used")
-    return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms) is kept (best "
-                f"alternative {what}, CV gain {gain:+.1%} < {opt.min_gain:.0%}; tried {'; '.join(tried)})")
+        d2.alpha_window = {"window_s": float(win), "timing": bool(timing)}
+        return d2, (f"acceleration: identified on the fit bags, {what} ({stats}; against the default "
+                    f"{default_s * 1e3:.3g} ms); used")
+    best_txt = (f"best alternative {what}: {'; '.join(why)}" if d2 is not ds
+                else "no alternative lowers the CV error")
+    return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms, no timing column) "
+                f"is kept ({best_txt}; {stats})")

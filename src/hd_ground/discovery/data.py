@@ -39,6 +39,8 @@ class Dataset:
     torque_constant: float
     notes: list[str] = field(default_factory=list)
     speed_lags: dict[str, float] = field(default_factory=dict)  # speed -> identified delay (s) it was re-timed by
+    # the acceleration used when not the default (core.choose_alpha_window): {"window_s", "timing"}
+    alpha_window: dict = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -47,7 +49,7 @@ class Dataset:
     def subset(self, mask: np.ndarray) -> "Dataset":
         return Dataset({k: v[mask] for k, v in self.signals.items()}, self.bag[mask], self.block[mask],
                        self.tfrac[mask], self.t[mask], self.segment[mask], self.bag_names, self.gear_ratio,
-                       self.torque_constant, list(self.notes), dict(self.speed_lags))
+                       self.torque_constant, list(self.notes), dict(self.speed_lags), dict(self.alpha_window))
 
 
 def _lag_sums(omega: np.ndarray, theta: np.ndarray, t: np.ndarray, seg: np.ndarray,
@@ -182,7 +184,11 @@ def play(x: np.ndarray, r: float, segment: np.ndarray | None = None) -> np.ndarr
     return np.asarray(o)
 
 
-def signals_of_mission(m: Mission, *, deriv_window_s: float = 0.02,
+#: The motor acceleration's default derivative window [s] (core.choose_alpha_window moves off it when identified).
+DEFAULT_ALPHA_WINDOW_S = 0.02
+
+
+def signals_of_mission(m: Mission, *, deriv_window_s: float = DEFAULT_ALPHA_WINDOW_S,
                        speed_lags: dict[str, float] | None = None,
                        alpha_window_s: float | None = None,
                        alpha_timing: bool = False) -> tuple[dict[str, np.ndarray], list[str]]:

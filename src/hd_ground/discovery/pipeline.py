@@ -21,7 +21,7 @@ from hd_bag.jsonsafe import json_safe
 
 from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing, discover_signal,
                    split_fit_heldout, static_term)
-from .data import Dataset, DiscoveryError, dataset_from_missions
+from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
 STRUCTURAL = {"inertia", "linear_stiffness", "structural_damping", "mesh_friction"}
@@ -120,11 +120,11 @@ def run_discovery(
         ds, st_ = choose_speed_timing(dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag,
                                                             retime_speeds=False), ds, ho, opt)
         ds.notes.append(st_)
-    if opt.alpha_window == "identify":
-        # the acceleration's derivative window, by the same rule on the fit bags (same speeds as chosen above)
+    if opt.alpha_window != "default":
+        # the acceleration's timing (and window), by the same rule on the fit bags (same speeds as chosen above)
         ds, st_ = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
             missions, names, blocks_per_bag=blocks_per_bag, retime_speeds=re, alpha_window_s=win,
-            alpha_timing=timing), ds, ho, opt)
+            alpha_timing=timing), ds, ho, opt, mode=opt.alpha_window)
         if st_:
             ds.notes.append(st_)
     for n_ in ds.notes:
@@ -162,7 +162,7 @@ def run_discovery(
 
     report = build_report(results, split, ds, within, twin_dir, opt)
     new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log,
-                                 speed_lags=ds.speed_lags)
+                                 speed_lags=ds.speed_lags, acceleration=report["acceleration"])
     report["twin_out"] = str(new_dir) if new_dir else None
     if plots and results:
         from .plots import plot_result
@@ -215,7 +215,9 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
         next((p for p in per if p["identifiable"]), None) or (per[0] if per else None)
     rep = {"format": REPORT_FORMAT, "bags": ds.bag_names, "split": split, "twin_in": twin_dir,
            "options": asdict(opt), "signals": per, "data_notes": list(ds.notes),
-           "speed_lags": dict(ds.speed_lags)}
+           "speed_lags": dict(ds.speed_lags),
+           # the motor acceleration the models were fitted with (core.choose_alpha_window)
+           "acceleration": dict(ds.alpha_window) or {"window_s": DEFAULT_ALPHA_WINDOW_S, "timing": False}}
     if primary:
         for k in ("signal", "error_before", "error_after", "effects", "declared_before", "declared_after",
                   "identifiable", "statements"):
@@ -228,14 +230,19 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
 
 
 def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
-                       retrain: bool, missions, log, speed_lags: dict | None = None) -> Path | None:
+                       retrain: bool, missions, log, speed_lags: dict | None = None,
+                       acceleration: dict | None = None) -> Path | None:
     """Write the augmented model version (only when something was found).
 
     ``speed_lags`` (``Dataset.speed_lags``: the re-timing discovery used, empty when the speeds were used as
     logged) go into ``config.json:speed_timing`` (:mod:`hd_twin.speedtiming`), so the twin evaluates the
     found terms on the speeds they were fitted on; absent = as logged. A trained network copied from the
     parent keeps the parent's entry (the inputs it was trained on) until it is retrained with the new one;
-    ``discovery.speed_timing`` always records discovery's."""
+    ``discovery.speed_timing`` always records discovery's. ``acceleration`` (the derivative window and timing
+    column discovery fitted with, ``core.choose_alpha_window``) is recorded in ``discovery.acceleration`` only:
+    no twin input depends on it (the twin derives its own accelerations, ``hd_twin.data``; the found terms and
+    the recalibrated T_C, b_visc, eps_omega are functions of speed, angle and current, and J_eq and the timing
+    coefficient J tau_a are not written), so the twin needs no entry for it."""
     # the twin evaluates static terms sample by sample: a term on a pre-sliding state (a path history) goes
     # in its static form (hd_ground.discovery.core.static_term); one without such a form stays in the report
     new_terms, dropped = [], []
@@ -290,6 +297,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
     if timing and not (twin is not None and "normalization" in cfg):
         cfg["speed_timing"] = timing  # physics-only version: the terms are evaluated on the speeds they were fitted on
     cfg["discovery"] = {"speed_timing": timing or "speeds used as logged",
+                        "acceleration": dict(acceleration or {}),
                         "recalibrated": [k for k in ("T_C", "b_visc", "eps_omega") if k in params],
                         "baseline_refit": {r.signal: r.refit_baseline_params for r in results},
                         "network": "copied from the parent version, not retrained" if twin is not None else "none (physics-only model)"}
