@@ -12,7 +12,8 @@ pass). This script shows where the baseline goes wrong, on the bench's own missi
 2. logged bags, per bag: the plain baseline [alpha_m, Q_red/N, omega_m, s(theta_m; d)] fitted on that bag alone,
    RMSE against d, with the logged signals and with one logged signal replaced by the truth's block mean
    (alpha_m; Q_red/N; theta_m at the torque's block-mean timing; all): which logged signal moves the best d
-   away from T_C / sigma0;
+   away from T_C / sigma0 (alpha_m: ``dataset_from_missions``' 20 ms window, the default before the eighth pass;
+   discover now identifies the window, 10 ms + timing at seed 1300: docs/DISCOVERY_PASSES.md, ninth pass, item 6);
 3. pooled (fit: missions 0-2, scored on the held-out mission 3, the bench's split) at d = T_C / sigma0: the
    held-out gain of discover's finding, the cubic in u = theta_f - mean times the state, (p0 + p1 u + p2 u^2 +
    p3 u^3) s, with the logged signals and with the truth's block means put in one after another (alpha_m, then
