@@ -282,7 +282,7 @@ FAMILY_EFFECTS = {
 DEFAULT_FAMILY_EFFECTS = ("position_periodic_torque", "stribeck_friction", "kinematic_error_harmonic")
 #: discover's (and greedy's) acceleration derivative window (--alpha-window, core.choose_alpha_window): "identify"
 #: (the default: moved off 20 ms only when identified on the fit bags), "timing" (20 ms + the timing column) or
-#: "default" (20 ms, nothing tried: the behaviour before the seventh pass)
+#: "default" (20 ms, nothing tried: the behaviour before the eighth pass)
 ALPHA_WINDOW = "identify"
 
 #: plant2 effect -> expected findings (signal, name, variable, order); None order: any

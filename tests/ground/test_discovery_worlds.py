@@ -39,7 +39,7 @@ CASES = [
 #: simulator's 1.077 (the 20 ms window gave 1.48 +- 0.16), held-out 0.1388 N*m (0.1407 with 20 ms), greedy on the same
 #: signals 0.1382 at its grid width 0.922; the simulator's own width with least-squares coefficients and the same
 #: terms scores 0.13837, z +6.8 against greedy: within one held-out bag a wrong width can win by 0.1-0.4 %
-#: systematically (README, discovery section; docs/DISCOVERY_PASSES.md, seventh pass).
+#: systematically (README, discovery section; docs/DISCOVERY_PASSES.md, eighth pass).
 HELDOUT_BAG_LUCK = {
     ("smooth-cubic", "position_periodic_torque"): "held-out bag favours greedy's grid width over the true one",
 }
