@@ -61,7 +61,8 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         train = [v for j, v in enumerate(units) if j != i]
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
                           seed=seed, threshold=THRESHOLD[0], failure_level=level,
-                          path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0])
+                          path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0],
+                          exposure_spread=SPREAD[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
@@ -126,6 +127,7 @@ def _run_folds(fold, items):
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
 PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth shape by AIC per fit)
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
+SPREAD = ["renewal"]  # the future exposure's variability in the prognosis (--exposure-spread; LifeModel.fit)
 RATE = ["mean"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
 FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
@@ -294,6 +296,9 @@ def main(argv=None) -> int:
                     help="the prognosis's rate of a unit's future exposure per mission: mean (default) or median of "
                          "its record's per-step rates (src/hd_prognostic/README.md, 'Dev-fleet coverage diagnosis'; "
                          "CSV datasets with exposure = time are unchanged)")
+    ap.add_argument("--exposure-spread", default="renewal", choices=("none", "renewal"),
+                    help="the future exposure's variability in the RUL: renewal (default; inverse-Gaussian passage "
+                         "time from the unit's per-step increment variance) or none (single-rate extrapolation)")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),
                     help="Virkler only: override --failure-at (kept for older commands)")
     ap.add_argument("--workers", type=int, default=1)
@@ -306,6 +311,7 @@ def main(argv=None) -> int:
     PATH[0] = args.path
     FAILURE_AT[0] = args.failure_at
     RATE[0] = args.exposure_rate
+    SPREAD[0] = args.exposure_spread
     JOBS[0] = args.jobs
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -410,7 +416,8 @@ def _louo_subset(units, eols, args, name, level=None):
         m = LifeModel.fit([v for j, v in enumerate(units) if j != i], exposure="csv exposure", feature="hi",
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed,
                           threshold="observable" if FAILURE_AT[0] == "crossing" else THRESHOLD[0],
-                          failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0])
+                          failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0],
+                          exposure_spread=SPREAD[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)

@@ -208,6 +208,20 @@ class UnitHistory:
             return float(self.E_next - self.E[-1])
         return float("nan")
 
+    def rate_var(self) -> float:
+        """Variance per time unit of the exposure increments about the mean rate (:meth:`rate` ``mean``): the
+        increments taken as independent with variance proportional to their time (for unit steps: the sample
+        variance of the per-step exposures), ``sum (dE - m dt)^2 / sum dt * n / (n - 1)``; 0 with fewer than two
+        known increments or a relative spread below 1e-6 (an exposure that is the time column)."""
+        dt, dE = np.diff(self.t), np.diff(self.E)
+        ok = (dt > 0) & np.isfinite(dE) & (dE >= 0)
+        n = int(ok.sum())
+        if n < 2:
+            return 0.0
+        m = float(np.sum(dE[ok]) / np.sum(dt[ok]))
+        v = float(np.sum((dE[ok] - m * dt[ok]) ** 2) / np.sum(dt[ok]) * n / (n - 1))
+        return v if m > 0 and v > (1e-6 * m) ** 2 else 0.0
+
     def exposure_at(self, t: float, rate: float | None = None) -> float:
         """Cumulative exposure at time ``t`` (interpolated; beyond the record: next-step value, then rate)."""
         if t <= self.t[-1]:
@@ -962,7 +976,8 @@ class LifeModel:
     def fit(cls, units: list[UnitHistory], exposure: str = "missions", feature: str = "hi",
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
             seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
-            path: str = "power", failure_at: str = "interval", exposure_rate: str = "mean") -> "LifeModel":
+            path: str = "power", failure_at: str = "interval", exposure_rate: str = "mean",
+            exposure_spread: str = "renewal") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -977,6 +992,9 @@ class LifeModel:
         the prognosis. ``exposure_rate``: how the prognosis extrapolates a unit's exposure to its failure
         exposure, ``mean`` (default: cumulative exposure grows at the mean rate) or ``median`` (the default
         before, kept for models saved without the key) per-step rate of its record (:meth:`UnitHistory.rate`).
+        ``exposure_spread``: ``renewal`` (default) draws the time to accrue the remaining exposure from the
+        inverse-Gaussian first passage of the unit's i.i.d. per-step increments (:meth:`UnitHistory.rate_var`;
+        constant increments unchanged), ``none`` extrapolates at the single rate (models saved without the key).
 
         ``path``: the latent path family, ``power`` (``r (E/E_ref)^b``), ``paris`` (crack-growth shape
         ``h(r E/E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1``: Paris' law with dK ~ sqrt(a) integrated, per-unit
@@ -997,6 +1015,8 @@ class LifeModel:
         the level; ``interval`` otherwise); the choice and its reason go to ``fit_info["failure_at_rule"]``."""
         if exposure_rate not in ("median", "mean"):
             raise ValueError(f"life-model fit: exposure_rate {exposure_rate!r} is not one of median, mean")
+        if exposure_spread not in ("none", "renewal"):
+            raise ValueError(f"life-model fit: exposure_spread {exposure_spread!r} is not one of none, renewal")
         rule = None
         if failure_at == "auto":  # from the failure definition (level + records), never from a score
             failure_at, rule = failure_at_rule(units, failure_level)
@@ -1241,6 +1261,10 @@ class LifeModel:
         # the prognosis's rate of a unit's future exposure (UnitHistory.rate); a model saved without it (before
         # the mean became the default) keeps the median it was scored with
         info["exposure_rate"] = exposure_rate
+        # the future exposure's variability in the prognosis (rul_samples): "renewal" (inverse-Gaussian passage
+        # time from the unit's per-step increment variance) or "none" (the single-rate extrapolation; models saved
+        # without the key)
+        info["exposure_spread"] = exposure_spread
         if level_aic is not None:
             info["level_aic"] = level_aic[fam]
             info["level"] = "fitted" if F.get("free_level") else "fixed"
@@ -1309,11 +1333,15 @@ class LifeModel:
             return self._rul_observable(z, h, t_k, rate, rng)
         E_k = h.exposure_at(t_k)
         Ef = self.sample_failure_exposure(z, E_k, rng)
+        # the future exposure's own variability (renewal of i.i.d. increments, mean `rate`, variance `v` per time
+        # unit): the time to accrue D is the first passage of a Brownian motion with that drift and variance,
+        # inverse Gaussian (mean D / rate, shape D^2 / v), var = D v / rate^3. Models saved without the key: none.
+        v = h.rate_var() if self.fit_info.get("exposure_spread", "none") == "renewal" else 0.0
         if h.discrete:
             # failure is found at the start of the first step whose start exposure reaches E_f
             E1 = h.exposure_at(t_k + 1, rate)  # exposure at the start of the next step (its own known load)
-            return 1.0 + np.ceil(np.maximum(Ef - E1, 0.0) / rate)
-        return (Ef - E_k) / rate
+            return 1.0 + np.ceil(_passage_time(np.maximum(Ef - E1, 0.0), rate, v, rng))
+        return _passage_time(Ef - E_k, rate, v, rng)
 
     def _rul_observable(self, z: np.ndarray, h: UnitHistory, t_k: float, rate: float, rng: np.random.Generator,
                         max_steps: int = 20000) -> np.ndarray:
@@ -1404,6 +1432,20 @@ class LifeModel:
         c = np.cumsum(w)
         q = np.interp([0.05, 0.5, 0.95], c, z)
         return tuple(float(np.exp(v) * X) for v in q)
+
+
+def _passage_time(D: np.ndarray, rate: float, v: float, rng: np.random.Generator) -> np.ndarray:
+    """Time for the cumulative exposure to grow by ``D`` (per sample) at mean ``rate`` and variance ``v`` per time
+    unit: ``D / rate`` when ``v == 0`` (no random draw), else the inverse-Gaussian first passage of the Brownian
+    (normal) approximation of the renewal process of i.i.d. increments, mean ``D / rate``, var ``D v / rate^3``."""
+    T = D / rate
+    if v <= 0:
+        return T
+    T = np.array(T, dtype=float)
+    pos = D > 0
+    if pos.any():
+        T[pos] = rng.wald(T[pos], D[pos] ** 2 / v)
+    return T
 
 
 def rate_scale(model: "LifeModel", rate: float) -> float:

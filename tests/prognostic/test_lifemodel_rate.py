@@ -30,9 +30,10 @@ def test_rate_estimators_on_skewed_increments():
 
 def test_fit_keeps_the_estimator_and_the_prognosis_uses_it():
     units, _ = synth_units(8, seed=3, censor_frac=0.0)
-    m = LifeModel.fit(units, n_draws=0, maxiter=100, exposure_rate="median")
+    # the rate alone (no renewal spread of the future exposure: tests/prognostic/test_lifemodel_spread.py)
+    m = LifeModel.fit(units, n_draws=0, maxiter=100, exposure_rate="median", exposure_spread="none")
     assert m.fit_info["exposure_rate"] == "median"
-    mm = LifeModel.fit(units, n_draws=0, maxiter=100)  # default: the mean
+    mm = LifeModel.fit(units, n_draws=0, maxiter=100, exposure_spread="none")  # default: the mean
     assert mm.fit_info["exposure_rate"] == "mean" and mm.theta == m.theta  # the fit itself is the same
     assert LifeModel.from_json(mm.to_json()).fit_info["exposure_rate"] == "mean"
     # a model saved before the key existed keeps the median it was scored with
