@@ -277,17 +277,26 @@ class Residuals:
     def one(self, t: float, tm: float, tf: float, wm: float, wf: float, tau: float, Q: float):
         """One valid sample inside a segment -> ``(Q_hat, r_Q, Q_for_twist, twist_raw, twist)``; same arithmetic
         as :meth:`block` (the model must have ``step_one``)."""
+        Q_hat = float(self.expected.step_one(t, self._input_one(tm, tf, wm, wf, tau)))
+        return self._row(Q_hat, tm, tf, Q, t >= self.settle_until)
+
+    def _input_one(self, tm: float, tf: float, wm: float, wf: float, tau: float) -> np.ndarray:
+        """The twin's input row of one sample (the block path's columns; temperature and command held)."""
         x = self._x1
         x[0], x[1], x[2], x[3], x[4] = tm, wm, tau, tf, wf
         x[I_TEMP] = self.temperature
         x[I_REF] = self.theta_ref
-        Q_hat = float(self.expected.step_one(t, x))
+        return x
+
+    def _row(self, Q_hat: float, tm: float, tf: float, Q: float, evaluate: bool) -> tuple:
+        """``(Q_hat, r_Q, Q_for_twist, twist_raw, twist)`` of one sample whose Q_hat is known: the arithmetic of
+        :meth:`_residuals` on scalars."""
         p = self.params
         r_Q = Q - Q_hat  # NaN when Q_red is not measured
         Qt = Q if Q == Q else Q_hat
         tw_raw = tf - tm / p.N
         twist = tw_raw - Qt / p.K_out
-        if t < self.settle_until:
+        if not evaluate:
             r_Q = twist = tw_raw = math.nan
         return Q_hat, r_Q, Qt, tw_raw, twist
 
@@ -301,28 +310,17 @@ class Residuals:
         steps, and the rows whose output came are returned, oldest first, as ``(t, stamp_ns, values,
         (Q_hat, r_Q, Q_for_twist, twist_raw, twist))``; same arithmetic as :meth:`block`."""
         tm, tf, wm, wf, tau, Q = v
-        x = self._x1
-        x[0], x[1], x[2], x[3], x[4] = tm, wm, tau, tf, wf
-        x[I_TEMP] = self.temperature
-        x[I_REF] = self.theta_ref
+        x = self._input_one(tm, tf, wm, wf, tau)
         self._enqueue(np.array([t]), np.array([stamp_ns], np.int64), np.array([v], float),
                       np.array([t >= self.settle_until]))
         q = self.expected.step(np.array([t]), x[None, :])
         if len(q) == 0:
             return []
         tq, sq, Vq, okq = self._dequeue(len(q))
-        p = self.params
         out = []
         for i in range(len(q)):
-            tm, tf, wm, wf, tau, Q = Vq[i].tolist()
-            Q_hat = float(q[i])
-            r_Q = Q - Q_hat
-            Qt = Q if Q == Q else Q_hat
-            tw_raw = tf - tm / p.N
-            twist = tw_raw - Qt / p.K_out
-            if not okq[i]:
-                r_Q = twist = tw_raw = math.nan
-            out.append((float(tq[i]), int(sq[i]), (tm, tf, wm, wf, tau, Q), (Q_hat, r_Q, Qt, tw_raw, twist)))
+            vk = tuple(Vq[i].tolist())
+            out.append((float(tq[i]), int(sq[i]), vk, self._row(float(q[i]), vk[0], vk[1], vk[5], bool(okq[i]))))
         return out
 
     def _reset_segment(self, t_s: float) -> None:
