@@ -198,8 +198,7 @@ class UnitHistory:
         coverage diagnosis")."""
         if estimator not in ("median", "mean"):
             raise ValueError(f"exposure rate estimator {estimator!r} is not one of median, mean")
-        dt, dE = np.diff(self.t), np.diff(self.E)
-        ok = (dt > 0) & np.isfinite(dE) & (dE >= 0)
+        dt, dE, ok = self._increments()
         if ok.any():
             if estimator == "mean":
                 return float(np.sum(dE[ok]) / np.sum(dt[ok]))
@@ -213,14 +212,18 @@ class UnitHistory:
         increments taken as independent with variance proportional to their time (for unit steps: the sample
         variance of the per-step exposures), ``sum (dE - m dt)^2 / sum dt * n / (n - 1)``; 0 with fewer than two
         known increments or a relative spread below 1e-6 (an exposure that is the time column)."""
-        dt, dE = np.diff(self.t), np.diff(self.E)
-        ok = (dt > 0) & np.isfinite(dE) & (dE >= 0)
+        dt, dE, ok = self._increments()
         n = int(ok.sum())
         if n < 2:
             return 0.0
         m = float(np.sum(dE[ok]) / np.sum(dt[ok]))
         v = float(np.sum((dE[ok] - m * dt[ok]) ** 2) / np.sum(dt[ok]) * n / (n - 1))
         return v if m > 0 and v > (1e-6 * m) ** 2 else 0.0
+
+    def _increments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-step time and exposure increments of the record and the steps with a known one (dt > 0, dE >= 0)."""
+        dt, dE = np.diff(self.t), np.diff(self.E)
+        return dt, dE, (dt > 0) & np.isfinite(dE) & (dE >= 0)
 
     def exposure_at(self, t: float, rate: float | None = None) -> float:
         """Cumulative exposure at time ``t`` (interpolated; beyond the record: next-step value, then rate)."""
