@@ -481,14 +481,11 @@ def paired_z(r_discover, r_greedy, n_chunks: int = 20) -> float | None:
     sqrt(n_chunks)) of the chunk means. Positive: discover is worse; z < 2: not worse beyond the sampling
     noise of the held-out bag. None when the residuals are not on the same rows.
     """
-    if r_discover is None or r_greedy is None or len(r_discover) != len(r_greedy) or len(r_greedy) < 2 * n_chunks:
+    from hd_ground.discovery.core import chunked_paired_z
+
+    if r_discover is None or r_greedy is None or len(r_discover) != len(r_greedy):
         return None
-    d = np.asarray(r_discover, float) ** 2 - np.asarray(r_greedy, float) ** 2
-    m = np.array([c.mean() for c in np.array_split(d, n_chunks)])
-    se = float(np.std(m, ddof=1) / np.sqrt(n_chunks))
-    if se <= 0:
-        return 0.0 if m.mean() == 0 else float(np.sign(m.mean()) * np.inf)
-    return float(m.mean() / se)
+    return chunked_paired_z(np.asarray(r_discover, float) ** 2 - np.asarray(r_greedy, float) ** 2, n_chunks)
 
 
 def _short(keys) -> str:
