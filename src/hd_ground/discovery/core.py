@@ -40,6 +40,8 @@ from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
                       state_var)
 from .loopshape import refine_loop_shape, twist_state_of
+from .prefilter import (DERIVATIVE_SIGNALS, SHIFT_RANGE, filtered_design, shift_samples, shifted_state_var,
+                        smooth_like_derivative)
 from .spectrum import OrderSpectrum, analyse_orders
 
 #: Effects the basic twin declares for each target when no twin config is given.
@@ -70,6 +72,9 @@ class StateSignals(dict):
             if len(parts) == 5:  # a Bouc-Wen loop state (loopshape.loop_state_var): distance, n, phi
                 cache[key] = hysteresis_state(full[parts[1]], float(parts[2]), float(parts[3]), float(parts[4]),
                                               segment)
+            elif len(parts) == 4:  # a state a fraction of a sample later (prefilter.shifted_state_var)
+                cache[key] = presliding_state(shift_samples(full[parts[1]], float(parts[3]), segment),
+                                              float(parts[2]), segment)
             else:
                 cache[key] = presliding_state(full[parts[1]], float(parts[2]), segment)
         return cache[key][self._rows]
@@ -148,6 +153,10 @@ class Options:
     # samples and the timing column, moved off the 20 ms default only when identified on the fit bags),
     # "timing" (20 ms, the timing column only), "default" (20 ms, nothing tried)
     alpha_window: str = "identify"
+    # the pre-sliding distance's profile (identify_presliding_filtered): "filtered" (on the torque balance filtered
+    # as the acceleration is, with the state's timing against the torque profiled jointly) or "raw" (on the raw
+    # columns, the ninth pass's behaviour)
+    presliding_fit: str = "filtered"
 
 
 @dataclass
@@ -725,6 +734,41 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
     return e1, sd1, note, float(eps0)
 
 
+def identify_presliding_filtered(sig: "StateSignals", t_full: np.ndarray, segment_full: np.ndarray, window_s: float,
+                                 target: str, srows: np.ndarray, block: np.ndarray, cols_of, d_range: tuple[float, float]):
+    """The pre-sliding distance d of theta_m profiled on the torque balance filtered as the acceleration is
+    (:mod:`.prefilter`), jointly with the state's timing against the torque (a fraction of a sample in
+    ``prefilter.SHIFT_RANGE``). Returns (SeparableFit with shapes d and, when identified, shift; the shift used, a
+    note for the statement).
+
+    ``sig``: the table discover works on (its rows in the full, time-ordered series ``t_full`` / ``segment_full``
+    it was cut from); ``srows``: its rows used for shape searches; ``cols_of(spec)``: the baseline columns with the
+    friction direction ``spec``; ``window_s``: the acceleration's derivative window. The timing is kept only when
+    identified (CV profile not flat, not on a bound, jackknife SD below its range); otherwise the state is taken at
+    the angle's samples and d profiled alone, on the same filtered equation."""
+    full_sig = StateSignals(sig._source[0], sig._source, np.arange(len(t_full)))
+    rows = sig._rows[srows]
+    cols0 = cols_of({"op": "var", "var": state_var("theta_m", d_range[1])})
+    deriv = [c.term is None and c.basis.get("op") == "var" and c.basis.get("var") in DERIVATIVE_SIGNALS for c in cols0]
+    names = [c.param for c in cols0]
+    yF = smooth_like_derivative(full_sig[target], t_full, segment_full, window_s)[rows]
+
+    def matrix_full(sh):
+        spec = {"op": "var", "var": shifted_state_var("theta_m", sh["d"], sh.get("shift", 0.0))}
+        return _baseline_matrix(cols_of(spec), full_sig)
+    design = filtered_design(matrix_full, deriv, t_full, segment_full, window_s, rows)
+    d_shape = Shape("d", d_range[0], d_range[1], log=True, n_grid=12)
+    f = fit_separable(yF, design, names, block, [d_shape, Shape("shift", *SHIFT_RANGE, log=False, n_grid=9)])
+    sd = f.shape_sd.get("shift", float("nan"))
+    if f.identified["shift"] and np.isfinite(sd) and sd < 0.5 * (SHIFT_RANGE[1] - SHIFT_RANGE[0]):
+        sh = float(f.shape["shift"])
+        return f, sh, (f"; on the torque balance filtered as the acceleration is, the state's timing against "
+                       f"the torque identified jointly: {sh:+.2f} +- {sd:.2f} samples")
+    why = "; ".join(n for n in f.notes if n.startswith("shift")) or f"jackknife SD {sd:.2g} samples"
+    f = fit_separable(yF, design, names, block, [d_shape])
+    return f, 0.0, f"; on the torque balance filtered as the acceleration is; the state's timing not identified ({why})"
+
+
 def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: list[str] | None = None,
                     extra_terms: list[dict] | None = None, twin_params: dict | None = None,
                     opt: Options | None = None, transition_width: tuple | None = None) -> SignalResult:
@@ -821,20 +865,33 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         if d_hi > d_lo:
             s_rows = _take(sig, srows)
 
-            def design_ps(sh):
-                spec = {"op": "var", "var": state_var("theta_m", sh["d"])}
-                return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, spec, twin_params)[0],
-                                        s_rows)
-            ps_fit = fit_separable(y[srows], design_ps, [c.param for c in bc], ds.block[srows],
-                                   [Shape("d", d_lo, d_hi, log=True, n_grid=12)])
-            gain = 1.0 - (ps_fit.cv_rmse / eps_fit.cv_rmse) ** 2 if eps_fit.cv_rmse > 0 else 0.0
+            def cols_of(spec):
+                return baseline_columns(target, avail, declared, extra_terms, spec, twin_params)[0]
+
+            ps_shift, ps_note = 0.0, ""
+            if opt.presliding_fit == "filtered":
+                ps_fit, ps_shift, ps_note = identify_presliding_filtered(
+                    sig, ds0.t, ds0.segment, float(ds.alpha_window.get("window_s", DEFAULT_ALPHA_WINDOW_S)),
+                    target, srows, ds.block[srows], cols_of, (d_lo, d_hi))
+            else:
+                def design_ps(sh):
+                    spec = {"op": "var", "var": state_var("theta_m", sh["d"])}
+                    return _baseline_matrix(cols_of(spec), s_rows)
+                ps_fit = fit_separable(y[srows], design_ps, [c.param for c in bc], ds.block[srows],
+                                       [Shape("d", d_lo, d_hi, log=True, n_grid=12)])
             d_ps = ps_fit.shape["d"]
+            ps_spec = {"op": "var", "var": shifted_state_var("theta_m", d_ps, ps_shift)}
+            # the law is chosen by the raw columns' CV error, as before (same rows and blocks as tanh's)
+            cv_ps = ps_fit.cv_rmse if opt.presliding_fit != "filtered" else fit_separable(
+                y[srows], lambda sh: _baseline_matrix(cols_of(ps_spec), s_rows), [c.param for c in bc],
+                ds.block[srows], [], jackknife=False).cv_rmse
+            gain = 1.0 - (cv_ps / eps_fit.cv_rmse) ** 2 if eps_fit.cv_rmse > 0 else 0.0
             if ps_fit.identified["d"] and gain >= opt.min_gain:
-                fric = {"op": "var", "var": state_var("theta_m", d_ps)}
+                fric = ps_spec
                 statements.append(
                     f"friction transition: a rate-independent pre-sliding state (Dahl / LuGre bristle state) of "
                     f"theta_m with pre-sliding distance d = {d_ps:.3g} +- {ps_fit.shape_sd['d']:.2g} rad (CV profile "
-                    f"over {d_lo:.3g}..{d_hi:.3g} rad, block jackknife) lowers the cross-validated error by "
+                    f"over {d_lo:.3g}..{d_hi:.3g} rad, block jackknife{ps_note}) lowers the cross-validated error by "
                     f"{gain:.1%} against tanh(omega_m / eps): the friction direction follows the travel since the "
                     "last reversal; used in the baseline instead of tanh")
             else:
@@ -865,6 +922,9 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     if isinstance(fric, dict):
         base_params["presliding_distance"] = float(ps_fit.shape["d"])
         base_params["presliding_distance_sd"] = float(ps_fit.shape_sd["d"])
+        if "shift" in ps_fit.shape:
+            base_params["presliding_timing_samples"] = float(ps_fit.shape["shift"])
+            base_params["presliding_timing_samples_sd"] = float(ps_fit.shape_sd["shift"])
 
     # 2. residual structure: order spectra on the fit data
     spectra: list[OrderSpectrum] = []
