@@ -735,32 +735,30 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
 
 
 def identify_presliding_filtered(sig: "StateSignals", t_full: np.ndarray, segment_full: np.ndarray, window_s: float,
-                                 target: str, srows: np.ndarray, block: np.ndarray, cols_of, d_range: tuple[float, float]):
+                                 target: str, srows: np.ndarray, block: np.ndarray, matrix_of, names: list[str],
+                                 derivative_cols: list[bool], d_range: tuple[float, float]):
     """The pre-sliding distance d of theta_m profiled on the torque balance filtered as the acceleration is
     (:mod:`.prefilter`), jointly with the state's timing against the torque (a fraction of a sample in
     ``prefilter.SHIFT_RANGE``). Returns (SeparableFit with shapes d and, when identified, shift; the shift used, a
     note for the statement).
 
     ``sig``: the table discover works on (its rows in the full, time-ordered series ``t_full`` / ``segment_full``
-    it was cut from); ``srows``: its rows used for shape searches; ``cols_of(spec)``: the baseline columns with the
-    friction direction ``spec``; ``window_s``: the acceleration's derivative window. The timing is kept only when
-    identified (CV profile not flat, not on a bound, jackknife SD below its range); otherwise the state is taken at
-    the angle's samples and d profiled alone, on the same filtered equation."""
+    it was cut from); ``srows``: its rows used for shape searches; ``matrix_of(spec, table)``: the model's columns
+    (``names``) on ``table`` with the friction direction ``spec``; ``derivative_cols``: which of them are smoothed
+    derivatives (not filtered again); ``window_s``: the acceleration's derivative window. The timing is kept only
+    when identified (CV profile not flat, not on a bound, jackknife SD under a quarter of its range); otherwise the
+    state is taken at the angle's samples and d profiled alone, on the same filtered equation."""
     full_sig = StateSignals(sig._source[0], sig._source, np.arange(len(t_full)))
     rows = sig._rows[srows]
-    cols0 = cols_of({"op": "var", "var": state_var("theta_m", d_range[1])})
-    deriv = [c.term is None and c.basis.get("op") == "var" and c.basis.get("var") in DERIVATIVE_SIGNALS for c in cols0]
-    names = [c.param for c in cols0]
     yF = smooth_like_derivative(full_sig[target], t_full, segment_full, window_s)[rows]
 
     def matrix_full(sh):
-        spec = {"op": "var", "var": shifted_state_var("theta_m", sh["d"], sh.get("shift", 0.0))}
-        return _baseline_matrix(cols_of(spec), full_sig)
-    design = filtered_design(matrix_full, deriv, t_full, segment_full, window_s, rows)
+        return matrix_of({"op": "var", "var": shifted_state_var("theta_m", sh["d"], sh.get("shift", 0.0))}, full_sig)
+    design = filtered_design(matrix_full, derivative_cols, t_full, segment_full, window_s, rows)
     d_shape = Shape("d", d_range[0], d_range[1], log=True, n_grid=12)
     f = fit_separable(yF, design, names, block, [d_shape, Shape("shift", *SHIFT_RANGE, log=False, n_grid=9)])
     sd = f.shape_sd.get("shift", float("nan"))
-    if f.identified["shift"] and np.isfinite(sd) and sd < 0.5 * (SHIFT_RANGE[1] - SHIFT_RANGE[0]):
+    if f.identified["shift"] and np.isfinite(sd) and sd < 0.25 * (SHIFT_RANGE[1] - SHIFT_RANGE[0]):
         sh = float(f.shape["shift"])
         return f, sh, (f"; on the torque balance filtered as the acceleration is, the state's timing against "
                        f"the torque identified jointly: {sh:+.2f} +- {sd:.2f} samples")
@@ -769,14 +767,62 @@ def identify_presliding_filtered(sig: "StateSignals", t_full: np.ndarray, segmen
     return f, 0.0, f"; on the torque balance filtered as the acceleration is; the state's timing not identified ({why})"
 
 
+def _is_derivative_basis(b: dict | None) -> bool:
+    return b is not None and b.get("op") == "var" and b.get("var") in DERIVATIVE_SIGNALS
+
+
+def _swap_state(b: dict, old_var: str, new_var: str) -> dict:
+    """A basis spec with the state column ``old_var`` replaced by ``new_var`` (inside products too)."""
+    if b.get("op") == "prod":
+        return {**b, "factors": [_swap_state(f, old_var, new_var) for f in b["factors"]]}
+    if b.get("var") == old_var:
+        return {**b, "var": new_var}
+    return b
+
+
+def _reidentify_presliding(sig, t_full, segment_full, window_s, target, srows, block, cols_of, keep, groups, sel,
+                           spec0: dict, d0: float, d_range) -> tuple | None:
+    """The pre-sliding distance and timing identified again given the selected groups (filtered CV profile +
+    jackknife, :func:`identify_presliding_filtered`), as the tanh width is (:func:`_reidentify_width`).
+
+    The first profile had the undeclared effects in its residual (e.g. a Stribeck rise, whose friction level near
+    zero speed sets LuGre's transition length g(omega) / sigma0); the selected groups' columns on the state follow
+    the distance under search, and groups that replace a baseline column (Stribeck replaces T_C s) stand in for it.
+    Returns (d, shift, d_sd, note, spec0) when d is identified and differs from ``d0`` by more than its SD, else
+    None."""
+    old_var = spec0["var"]
+    replaced = {j for gi in sel for j in getattr(groups[gi][0], "replace_idx", ())}
+    kb = [j for j in range(len(keep)) if j not in replaced]
+    cols = [cols_of(spec0)[keep[j]] for j in kb]
+    names = [c.param for c in cols] + [f"g{gi}_{k}" for gi in sel for k in range(len(groups[gi][0].basis))]
+    deriv = [c.term is None and _is_derivative_basis(c.basis) for c in cols] + [
+        _is_derivative_basis(b) for gi in sel for b in groups[gi][0].basis]
+
+    def matrix_of(spec, table):
+        Xb = _baseline_matrix(cols_of(spec), table)[:, keep][:, kb]
+        Xg = [basis_matrix([_swap_state(b, old_var, spec["var"]) for b in groups[gi][0].basis], table) for gi in sel]
+        return np.column_stack([Xb] + Xg)
+    f, sh, note = identify_presliding_filtered(sig, t_full, segment_full, window_s, target, srows, block, matrix_of,
+                                               names, deriv, d_range)
+    d1, sd1 = float(f.shape["d"]), float(f.shape_sd["d"])
+    if not f.identified["d"] or not np.isfinite(sd1) or abs(d1 - d0) <= sd1:
+        return None
+    note = (f"pre-sliding distance identified again given the selected effects: d {d0:.3g} -> {d1:.3g} +- {sd1:.2g} "
+            f"rad (CV profile over the same range, block jackknife{note}; the first estimate had the undeclared "
+            "effects in its residual); candidates and selection redone with it")
+    return d1, sh, sd1, note, spec0, f
+
+
 def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: list[str] | None = None,
                     extra_terms: list[dict] | None = None, twin_params: dict | None = None,
-                    opt: Options | None = None, transition_width: tuple | None = None) -> SignalResult:
+                    opt: Options | None = None, transition_width: tuple | None = None,
+                    presliding: tuple | None = None) -> SignalResult:
     """Run discovery for one target signal; see the module docstring.
 
     ``transition_width``: (eps, sd, note, first eps) of a friction transition width already identified given
     the selected effects (internal: set by the second pass, see :func:`_reidentify_width`); ``error_before``
-    stays the baseline's at its first width."""
+    stays the baseline's at its first width. ``presliding``: the same for the pre-sliding state (internal, see
+    :func:`_reidentify_presliding`)."""
     opt = opt or Options()
     ds0, heldout0 = ds, heldout
     declared = list(DEFAULT_DECLARED.get(target, []) if declared is None else declared)
@@ -860,6 +906,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     # distance is identified and it lowers the CV error by ``min_gain`` (the selection's own rule)
     fric = sgn_eps
     ps_fit = None
+    alpha_win = float(ds.alpha_window.get("window_s", DEFAULT_ALPHA_WINDOW_S))
+    d_lo = d_hi = 0.0
     if eps_fit is not None and "theta_m" in avail:
         d_lo, d_hi = presliding_range(sf["theta_m"], sf["omega_m"], ds.segment[fit])
         if d_hi > d_lo:
@@ -869,10 +917,14 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 return baseline_columns(target, avail, declared, extra_terms, spec, twin_params)[0]
 
             ps_shift, ps_note = 0.0, ""
-            if opt.presliding_fit == "filtered":
+            if presliding is not None:  # second pass: identified again given the selected effects
+                ps_fit, ps_shift = presliding[5], float(presliding[1])
+            elif opt.presliding_fit == "filtered":
+                cols0 = cols_of({"op": "var", "var": state_var("theta_m", d_hi)})
                 ps_fit, ps_shift, ps_note = identify_presliding_filtered(
-                    sig, ds0.t, ds0.segment, float(ds.alpha_window.get("window_s", DEFAULT_ALPHA_WINDOW_S)),
-                    target, srows, ds.block[srows], cols_of, (d_lo, d_hi))
+                    sig, ds0.t, ds0.segment, alpha_win, target, srows, ds.block[srows],
+                    lambda spec, table: _baseline_matrix(cols_of(spec), table), [c.param for c in cols0],
+                    [c.term is None and _is_derivative_basis(c.basis) for c in cols0], (d_lo, d_hi))
             else:
                 def design_ps(sh):
                     spec = {"op": "var", "var": state_var("theta_m", sh["d"])}
@@ -886,7 +938,10 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 y[srows], lambda sh: _baseline_matrix(cols_of(ps_spec), s_rows), [c.param for c in bc],
                 ds.block[srows], [], jackknife=False).cv_rmse
             gain = 1.0 - (cv_ps / eps_fit.cv_rmse) ** 2 if eps_fit.cv_rmse > 0 else 0.0
-            if ps_fit.identified["d"] and gain >= opt.min_gain:
+            if presliding is not None:
+                fric = ps_spec
+                statements.append(presliding[3])
+            elif ps_fit.identified["d"] and gain >= opt.min_gain:
                 fric = ps_spec
                 statements.append(
                     f"friction transition: a rate-independent pre-sliding state (Dahl / LuGre bristle state) of "
@@ -910,6 +965,10 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     # the error "before" is the baseline's as identified on its own: in a second pass (width identified again
     # given the effects) the baseline at its first width, so the width's second look is credited to "after"
     Xb_before, beta_before = Xb_all, beta_b
+    if presliding is not None:
+        Xb_before = _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, presliding[4],
+                                                      twin_params)[0], sig)[:, keep]
+        beta_before = _lstsq(Xb_before[fit], y[fit])
     if transition_width is not None and len(transition_width) > 3:
         Xb_before = _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, float(transition_width[3]),
                                                       twin_params)[0], sig)[:, keep]
@@ -1071,6 +1130,15 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             # selected groups it is identified again, and candidates built on it are selected again
             return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
                                    twin_params=twin_params, opt=opt, transition_width=rew)
+    if (presliding is None and transition_width is None and isinstance(fric, dict) and sel
+            and opt.presliding_fit == "filtered"):
+        rep = _reidentify_presliding(sig, ds0.t, ds0.segment, alpha_win, target, srows, ds.block[srows],
+                                     lambda spec: baseline_columns(target, avail, declared, extra_terms, spec,
+                                                                   twin_params)[0],
+                                     keep, groups, sel, fric, float(ps_fit.shape["d"]), (d_lo, d_hi))
+        if rep is not None:
+            return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
+                                   twin_params=twin_params, opt=opt, presliding=rep)
     cv_folds = gram.cv_sse(_model(base_idx, groups, sel))
     # the final shapes' uncertainty by variable projection on the cross-validated residuals (sandwich), and
     # whether a least-squares refinement of the same CV objective runs into a degenerate optimum (reported)
