@@ -824,6 +824,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     stays the baseline's at its first width. ``presliding``: the same for the pre-sliding state (internal, see
     :func:`_reidentify_presliding`)."""
     opt = opt or Options()
+    if opt.presliding_fit not in ("filtered", "raw"):
+        raise DiscoveryError(f"Options.presliding_fit must be 'filtered' or 'raw', not {opt.presliding_fit!r}")
     ds0, heldout0 = ds, heldout
     declared = list(DEFAULT_DECLARED.get(target, []) if declared is None else declared)
     extra_terms = list(extra_terms or [])
