@@ -314,7 +314,8 @@ def _match(k, want) -> bool:
 def _greedy(bags: list[str], signal: str) -> dict:
     """The plain greedy least-squares reference on the same bags, the last one held out."""
     from hd_bag import read_mission
-    from hd_ground.discovery.core import Options, choose_alpha_window, choose_speed_timing, standstill_rows
+    from hd_ground.discovery.core import (Options, choose_alpha_window, choose_speed_timing, choose_twist_window,
+                                          standstill_rows)
     from hd_ground.discovery.data import dataset_from_missions
     from hd_ground.discovery.greedy import greedy_discover
 
@@ -327,6 +328,7 @@ def _greedy(bags: list[str], signal: str) -> dict:
         ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
             ms, [str(b) for b in bags], retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho,
             mode=ALPHA_WINDOW)[0]
+    ds = choose_twist_window(ds, ho)[0]  # ... and the same twist (its output-angle smoothing choice, on the fit bags)
     still = standstill_rows(ds, Options().standstill_sigmas)[0] if signal == "tau_m" else None
     return greedy_discover(ds, signal, ho, standstill=still)
 

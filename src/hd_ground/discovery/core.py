@@ -36,7 +36,7 @@ import numpy as np
 from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_state, vp_shape
 from hd_twin.terms import basis_matrix, evaluate_terms
 
-from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError
+from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, with_smoothed_twist
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
                       state_var)
 from .loopshape import refine_loop_shape, twist_state_of
@@ -148,6 +148,9 @@ class Options:
     # samples and the timing column, moved off the 20 ms default only when identified on the fit bags),
     # "timing" (20 ms, the timing column only), "default" (20 ms, nothing tried)
     alpha_window: str = "identify"
+    # the twist's output-angle smoothing (choose_twist_window): "identify" (as logged, or a quadratic
+    # Savitzky-Golay smoother of 5-33 samples of theta_f when identified on the fit bags), "default" (as logged)
+    twist_window: str = "identify"
 
 
 @dataclass
@@ -1394,3 +1397,74 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
                 else "no alternative lowers the CV error")
     return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms, no timing column) "
                 f"is kept ({best_txt}; {stats})")
+
+
+def twist_baseline_cv_folds(ds: Dataset, heldout: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """Per-block leave-one-block-out SSE of the plain Q_red baseline (K w + c w' - J_out alpha_f,
+    :func:`baseline_columns`) on the fit bags, and its CV RMSE; None when Q_red or the twist is missing."""
+    if "Q_red" not in ds.signals or "windup" not in ds.signals:
+        return None
+    fit = ~heldout
+    if fit.sum() < Options().min_samples or len(np.unique(ds.block[fit])) < 3:
+        return None
+    sig = _take(ds.signals, fit)
+    avail = {k for k, v in sig.items() if np.std(v) > 0}
+    if "windup" not in avail:
+        return None
+    X = _baseline_matrix(baseline_columns("Q_red", avail, [], [], 1.0, {})[0], sig)
+    sse = _BlockGram(X, sig["Q_red"], ds.block[fit]).cv_sse(list(range(X.shape[1])))
+    return sse, float(np.sqrt(sse.sum() / fit.sum()))
+
+
+def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
+                        windows: tuple[int, ...] = (5, 9, 17, 33)) -> tuple[Dataset, str]:
+    """The twist as logged or through a smoothed output angle (:func:`data.with_smoothed_twist`), chosen on the fit bags.
+
+    The twist w = theta_m / N - theta_f is the regressor of every Q_red model; where the output encoder's step is
+    a large part of it, its quantisation error is an error in the variable that no term can fit and that bends
+    the identified torsion law (a dead-zone or a softening law then beats the true cubic on the fit missions and
+    extrapolates worse: docs/DISCOVERY_PASSES.md, twelfth pass). Candidates: quadratic Savitzky-Golay smoothers
+    of ``windows`` samples (doubling from the shortest). The one with the lowest cross-validated error of the
+    plain Q_red baseline on the fit bags replaces the logged twist only when it is identified against it, by the
+    rule of :func:`choose_alpha_window` (CV mean squared error lower by ``opt.min_gain``, in at least
+    ``opt.fold_majority`` of the blocks, at least one paired standard error, and not on the longest window tried).
+    Returns the dataset and a statement (empty when nothing was tested)."""
+    opt = opt or Options()
+    if opt.twist_window != "identify" or "theta_f" not in ds.signals:
+        return ds, ""
+    base = twist_baseline_cv_folds(ds, heldout)
+    if base is None:
+        return ds, ""
+    sse_d, cv_d = base
+    longest = max(windows)
+    best = (cv_d, 0, ds, sse_d)
+    tried = [f"as logged: {cv_d:.4g}"]
+    for w in windows:
+        d2 = with_smoothed_twist(ds, w)
+        r = twist_baseline_cv_folds(d2, heldout)
+        if r is None or len(r[0]) != len(sse_d):
+            continue
+        tried.append(f"{w} samples: {r[1]:.4g}")
+        if r[1] < best[0]:
+            best = (r[1], w, d2, r[0])
+    cv, w, d2, sse = best
+    if w == 0:
+        return ds, f"twist: as logged (no smoothing of theta_f lowers the Q_red baseline's CV error; tried {'; '.join(tried)})"
+    gain = 1.0 - float(sse.sum() / sse_d.sum()) if sse_d.sum() > 0 else 0.0
+    folds = float(np.mean(sse < sse_d))
+    t_pair = _paired_t(sse_d, sse)
+    stats = (f"CV RMSE of the Q_red baseline {cv_d:.4g} -> {cv:.4g} N*m, {gain:+.1%}, better in {folds:.0%} of the "
+             f"blocks, {t_pair:.1f} paired SE; tried {'; '.join(tried)}")
+    why = []
+    if gain < opt.min_gain:
+        why.append(f"gain < {opt.min_gain:.0%}")
+    if folds < opt.fold_majority:
+        why.append(f"better in < {opt.fold_majority:.0%} of the blocks")
+    if t_pair < 1.0:
+        why.append("within one standard error")
+    if w == longest:
+        why.append(f"on the longest window tried ({longest} samples): only bounded, not identified")
+    if not why:
+        return d2, (f"twist: theta_f smoothed (quadratic Savitzky-Golay, {w} samples) before the twist "
+                    f"theta_m / N - theta_f, identified on the fit bags ({stats}); used")
+    return ds, f"twist: as logged (best smoothing {w} samples: {'; '.join(why)}; {stats})"

@@ -19,8 +19,8 @@ import numpy as np
 from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
-from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing, discover_signal,
-                   split_fit_heldout, static_term)
+from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing,
+                   choose_twist_window, discover_signal, split_fit_heldout, static_term)
 from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
@@ -127,6 +127,11 @@ def run_discovery(
             alpha_timing=timing), ds, ho, opt, mode=opt.alpha_window)
         if st_:
             ds.notes.append(st_)
+    if opt.twist_window != "default":
+        # the twist's output angle, smoothed or as logged, by the same rule on the fit bags (Q_red models only)
+        ds, st_ = choose_twist_window(ds, ho, opt)
+        if st_:
+            ds.notes.append(st_)
     for n_ in ds.notes:
         log(f"note: {n_}")
     split = ({"mode": "bags", "heldout": [names[i] for i in ho_bags]} if ho_bags
@@ -217,7 +222,10 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
            "options": asdict(opt), "signals": per, "data_notes": list(ds.notes),
            "speed_lags": dict(ds.speed_lags),
            # the motor acceleration the models were fitted with (core.choose_alpha_window)
-           "acceleration": dict(ds.alpha_window) or {"window_s": DEFAULT_ALPHA_WINDOW_S, "timing": False}}
+           "acceleration": dict(ds.alpha_window) or {"window_s": DEFAULT_ALPHA_WINDOW_S, "timing": False},
+           # the twist the Q_red models were fitted with (core.choose_twist_window): theta_f's smoothing window in
+           # samples, 0 as logged; a twin fitted here reads the twist the same way
+           "twist_window_samples": int(ds.twist_window)}
     if primary:
         for k in ("signal", "error_before", "error_after", "effects", "declared_before", "declared_after",
                   "identifiable", "statements"):
