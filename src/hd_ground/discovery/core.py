@@ -1015,6 +1015,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
                                    twin_params=twin_params, opt=opt, transition_width=rew)
     cv_folds = gram.cv_sse(_model(base_idx, groups, sel))
+    held_closed: set[str] = set()
     # the final shapes' uncertainty by variable projection on the cross-validated residuals (sandwich), and
     # whether a least-squares refinement of the same CV objective runs into a degenerate optimum (reported)
     for gi in sel:
@@ -1101,6 +1102,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                           f"{e['contribution']:+.1%}, {e['contribution_z']:.1f} paired SE; alone {e['explained']:+.1%}): "
                           "not an effect")
         sel = [g for g in sel if g != gi]
+        sel = _reselect_without_heldout_drop(gram, base_idx, groups, opt, sel, gi, trace, closed, held_closed,
+                                             reshape, confirm, statements)
     terms = [terms[i] for i in order]
     declared_after = list(declared)
     for e in effects:
@@ -1145,6 +1148,33 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         offsets=offsets, comparisons=comp, plot=plot, cv_folds=cv_folds,
     )
 
+
+
+def _reselect_without_heldout_drop(gram, base_idx, groups, opt, sel, gi, trace, closed, held_closed, reshape, confirm,
+                                   statements) -> list[int]:
+    """After the held-out arbiter dropped group ``gi``: when ``gi``'s entry had displaced selected groups (a drop
+    from the model after ``gi`` was added, in the selection trace), the selection is made again on the fit blocks
+    without ``gi``'s family, as after a group whose shape is not identified: a group that does not generalise must
+    not have steered which others stay. Returns the selection to score (``sel`` itself when nothing was displaced).
+    The held-out data only veto, as before; what enters is chosen by the fit blocks' CV."""
+    cand = groups[gi][0]
+    label = f"{cand.name}[{cand.family}]"
+    added = [i for i, r in enumerate(trace) if r.get("step") == "add" and r.get("candidate") == label]
+    if not added:
+        return sel
+    displaced = [r for r in trace[added[-1] + 1:] if r.get("step", "").startswith("drop (unidentified)")
+                 or r.get("step") == "drop"]
+    if not displaced:
+        return sel
+    held_closed.add(cand.family)
+    sel2, tr2 = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm,
+                              closed=set(closed) | held_closed)
+    trace.append({"step": "reselect (held-out drop)", "closed": sorted(held_closed),
+                  "displaced": [r["candidate"] for r in displaced]})
+    trace += tr2
+    statements.append(f"{label} had displaced {sorted({r['candidate'] for r in displaced})} from the model: selection made "
+                      f"again on the fit blocks without {sorted(held_closed)}")
+    return sel2
 
 
 def heldout_gain_z(r_without: np.ndarray, r_with: np.ndarray, n_chunks: int = 20) -> float:
