@@ -1429,49 +1429,66 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
                 f"is kept ({best_txt}; {stats})")
 
 
-def twist_baseline_cv_folds(ds: Dataset, heldout: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """Per-block leave-one-block-out SSE of the plain Q_red baseline (K w + c w' - J_out alpha_f,
-    :func:`baseline_columns`) on the fit bags, and its CV RMSE; None when Q_red or the twist is missing."""
+def twist_model_cv_folds(ds: Dataset, heldout: np.ndarray, terms: list[dict] | None = None,
+                         declared: list[str] | None = None, extra_terms: list[dict] | None = None
+                         ) -> tuple[np.ndarray, float] | None:
+    """Per-block leave-one-block-out SSE on the fit bags of a Q_red model with its coefficients refitted: the
+    baseline (K w + c w' - J_out alpha_f, :func:`baseline_columns`) plus the basis of each of ``terms`` (the
+    effects a discovery selected; none: the plain baseline); and its CV RMSE. None when Q_red or the twist is
+    missing."""
     if "Q_red" not in ds.signals or "windup" not in ds.signals:
         return None
     fit = ~heldout
     if fit.sum() < Options().min_samples or len(np.unique(ds.block[fit])) < 3:
         return None
-    sig = _take(ds.signals, fit)
+    sig = StateSignals(ds.signals, (ds.signals, ds.segment, {}), np.arange(ds.n)).rows_of(fit)
     avail = {k for k, v in sig.items() if np.std(v) > 0}
     if "windup" not in avail:
         return None
-    X = _baseline_matrix(baseline_columns("Q_red", avail, [], [], 1.0, {})[0], sig)
+    X = [_baseline_matrix(baseline_columns("Q_red", avail, list(declared or []), list(extra_terms or []), 1.0, {})[0],
+                          sig)]
+    X += [basis_matrix(t["basis"], sig) for t in (terms or [])]
+    X = np.concatenate(X, 1)
     sse = _BlockGram(X, sig["Q_red"], ds.block[fit]).cv_sse(list(range(X.shape[1])))
     return sse, float(np.sqrt(sse.sum() / fit.sum()))
 
 
 def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
-                        windows: tuple[int, ...] = (5, 9, 17, 33)) -> tuple[Dataset, str]:
+                        windows: tuple[int, ...] = (5, 9, 17, 33), terms: list[dict] | None = None,
+                        declared: list[str] | None = None, extra_terms: list[dict] | None = None
+                        ) -> tuple[Dataset, str]:
     """The twist as logged or through a smoothed output angle (:func:`data.with_smoothed_twist`), chosen on the fit bags.
 
     The twist w = theta_m / N - theta_f is the regressor of every Q_red model; where the output encoder's step is
     a large part of it, its quantisation error is an error in the variable that no term can fit and that bends
-    the identified torsion law (a dead-zone or a softening law then beats the true cubic on the fit missions and
-    extrapolates worse: docs/DISCOVERY_PASSES.md, twelfth pass). Candidates: quadratic Savitzky-Golay smoothers
-    of ``windows`` samples (doubling from the shortest). The one with the lowest cross-validated error of the
-    plain Q_red baseline on the fit bags replaces the logged twist only when it is identified against it, by the
+    the identified torsion law (a dead-zone law then beats the true cubic on the fit missions and extrapolates
+    worse: docs/DISCOVERY_PASSES.md, twelfth pass). Candidates: quadratic Savitzky-Golay smoothers of
+    ``windows`` samples (doubling from the shortest). The reference model is the one the data selected with the
+    logged twist (``terms``: its effects; the pipeline runs the Q_red discovery once as logged first), refitted
+    on each twist: the plain baseline would credit a smoother for removing the output motion of an effect it
+    does not model yet (a kinematic-error ripple at twice the motor's rotation passes into theta_f). The one with
+    the lowest cross-validated error replaces the logged twist only when it is identified against it, by the
     rule of :func:`choose_alpha_window` (CV mean squared error lower by ``opt.min_gain``, in at least
     ``opt.fold_majority`` of the blocks, at least one paired standard error, and not on the longest window tried).
     Returns the dataset and a statement (empty when nothing was tested)."""
     opt = opt or Options()
     if opt.twist_window != "identify" or "theta_f" not in ds.signals:
         return ds, ""
-    base = twist_baseline_cv_folds(ds, heldout)
+
+    def folds(d):
+        return twist_model_cv_folds(d, heldout, terms, declared, extra_terms)
+    base = folds(ds)
     if base is None:
         return ds, ""
     sse_d, cv_d = base
+    ref = "the plain Q_red baseline" if not terms else \
+        "the Q_red model selected with the logged twist (" + ", ".join(t["name"] for t in terms) + ")"
     longest = max(windows)
     best = (cv_d, 0, ds, sse_d)
     tried = [f"as logged: {cv_d:.4g}"]
     for w in windows:
         d2 = with_smoothed_twist(ds, w)
-        r = twist_baseline_cv_folds(d2, heldout)
+        r = folds(d2)
         if r is None or len(r[0]) != len(sse_d):
             continue
         tried.append(f"{w} samples: {r[1]:.4g}")
@@ -1479,16 +1496,16 @@ def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = 
             best = (r[1], w, d2, r[0])
     cv, w, d2, sse = best
     if w == 0:
-        return ds, f"twist: as logged (no smoothing of theta_f lowers the Q_red baseline's CV error; tried {'; '.join(tried)})"
+        return ds, f"twist: as logged (no smoothing of theta_f lowers the CV error of {ref}; tried {'; '.join(tried)})"
     gain = 1.0 - float(sse.sum() / sse_d.sum()) if sse_d.sum() > 0 else 0.0
-    folds = float(np.mean(sse < sse_d))
+    fb = float(np.mean(sse < sse_d))
     t_pair = _paired_t(sse_d, sse)
-    stats = (f"CV RMSE of the Q_red baseline {cv_d:.4g} -> {cv:.4g} N*m, {gain:+.1%}, better in {folds:.0%} of the "
+    stats = (f"CV RMSE of {ref} {cv_d:.4g} -> {cv:.4g} N*m, {gain:+.1%}, better in {fb:.0%} of the "
              f"blocks, {t_pair:.1f} paired SE; tried {'; '.join(tried)}")
     why = []
     if gain < opt.min_gain:
         why.append(f"gain < {opt.min_gain:.0%}")
-    if folds < opt.fold_majority:
+    if fb < opt.fold_majority:
         why.append(f"better in < {opt.fold_majority:.0%} of the blocks")
     if t_pair < 1.0:
         why.append("within one standard error")
@@ -1496,5 +1513,5 @@ def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = 
         why.append(f"on the longest window tried ({longest} samples): only bounded, not identified")
     if not why:
         return d2, (f"twist: theta_f smoothed (quadratic Savitzky-Golay, {w} samples) before the twist "
-                    f"theta_m / N - theta_f, identified on the fit bags ({stats}); used")
+                    f"theta_m / N - theta_f, identified on the fit bags ({stats}); used for Q_red")
     return ds, f"twist: as logged (best smoothing {w} samples: {'; '.join(why)}; {stats})"

@@ -21,7 +21,7 @@ from hd_bag.jsonsafe import json_safe
 
 from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing,
                    choose_twist_window, discover_signal, split_fit_heldout, static_term)
-from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions
+from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions, with_smoothed_twist
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
 STRUCTURAL = {"inertia", "linear_stiffness", "structural_damping", "mesh_friction"}
@@ -127,11 +127,6 @@ def run_discovery(
             alpha_timing=timing), ds, ho, opt, mode=opt.alpha_window)
         if st_:
             ds.notes.append(st_)
-    if opt.twist_window != "default":
-        # the twist's output angle, smoothed or as logged, by the same rule on the fit bags (Q_red models only)
-        ds, st_ = choose_twist_window(ds, ho, opt)
-        if st_:
-            ds.notes.append(st_)
     for n_ in ds.notes:
         log(f"note: {n_}")
     split = ({"mode": "bags", "heldout": [names[i] for i in ho_bags]} if ho_bags
@@ -139,6 +134,7 @@ def run_discovery(
 
     targets = signals or ["tau_m"] + (["Q_red"] if "Q_red" in ds.signals else [])
     results: list[SignalResult] = []
+    twist_window = 0  # theta_f's smoothing window for the twist of the Q_red models (0: as logged)
     for target in targets:
         if target not in ds.signals:
             log(f"{target}: not measured in these bags; skipped")
@@ -148,6 +144,16 @@ def run_discovery(
             decl = list(DEFAULT_DECLARED[target])
         log(f"{target}: discovering (declared: {decl or 'none'}) ...")
         res = discover_signal(ds, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
+        if target == "Q_red" and opt.twist_window != "default":
+            # the twist's output angle, smoothed or as logged, chosen on the fit bags with the model just selected
+            # (core.choose_twist_window); when a smoother is identified, the Q_red discovery is made again with it
+            ds_q, st_ = choose_twist_window(ds, ho, opt, terms=res.terms, declared=decl, extra_terms=extra)
+            if st_:
+                ds.notes.append(st_)
+                log(f"note: {st_}")
+            if ds_q is not ds:
+                res = discover_signal(ds_q, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
+                twist_window = int(ds_q.twist_window)
         results.append(res)
         if results_out is not None:
             results_out.append(res)
@@ -157,6 +163,8 @@ def run_discovery(
     if within_bag_check and ho_bags:
         # second, independent run: fit bags only, last time blocks of each held out
         fit_only = ds.subset(~np.isin(ds.bag, ho_bags))
+        if twist_window:
+            fit_only = with_smoothed_twist(fit_only, twist_window)
         ho2 = split_fit_heldout(fit_only, None, heldout_frac)
         for target in [r.signal for r in results if r.identifiable]:
             decl = [r.declared_before for r in results if r.signal == target][0]
@@ -166,6 +174,9 @@ def run_discovery(
                               "effects": [_effect_brief(e) for e in r2.effects], "heldout_frac": heldout_frac}
 
     report = build_report(results, split, ds, within, twin_dir, opt)
+    # the twist the Q_red models were fitted with (core.choose_twist_window): theta_f's smoothing window in
+    # samples, 0 as logged; a twin fitted here reads the twist the same way
+    report["twist_window_samples"] = twist_window
     new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log,
                                  speed_lags=ds.speed_lags, acceleration=report["acceleration"])
     report["twin_out"] = str(new_dir) if new_dir else None
@@ -222,10 +233,7 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
            "options": asdict(opt), "signals": per, "data_notes": list(ds.notes),
            "speed_lags": dict(ds.speed_lags),
            # the motor acceleration the models were fitted with (core.choose_alpha_window)
-           "acceleration": dict(ds.alpha_window) or {"window_s": DEFAULT_ALPHA_WINDOW_S, "timing": False},
-           # the twist the Q_red models were fitted with (core.choose_twist_window): theta_f's smoothing window in
-           # samples, 0 as logged; a twin fitted here reads the twist the same way
-           "twist_window_samples": int(ds.twist_window)}
+           "acceleration": dict(ds.alpha_window) or {"window_s": DEFAULT_ALPHA_WINDOW_S, "timing": False}}
     if primary:
         for k in ("signal", "error_before", "error_after", "effects", "declared_before", "declared_after",
                   "identifiable", "statements"):
