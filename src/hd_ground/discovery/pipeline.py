@@ -175,10 +175,11 @@ def run_discovery(
 
     report = build_report(results, split, ds, within, twin_dir, opt)
     # the twist the Q_red models were fitted with (core.choose_twist_window): theta_f's smoothing window in
-    # samples, 0 as logged; a twin fitted here reads the twist the same way
+    # samples, 0 as logged (also in the new twin's discovery block; no twin node smooths theta_f yet)
     report["twist_window_samples"] = twist_window
     new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log,
-                                 speed_lags=ds.speed_lags, acceleration=report["acceleration"])
+                                 speed_lags=ds.speed_lags, acceleration=report["acceleration"],
+                                 twist_window=twist_window)
     report["twin_out"] = str(new_dir) if new_dir else None
     if plots and results:
         from .plots import plot_result
@@ -247,7 +248,7 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
 
 def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
                        retrain: bool, missions, log, speed_lags: dict | None = None,
-                       acceleration: dict | None = None) -> Path | None:
+                       acceleration: dict | None = None, twist_window: int = 0) -> Path | None:
     """Write the augmented model version (only when something was found).
 
     ``speed_lags`` (``Dataset.speed_lags``: the re-timing discovery used, empty when the speeds were used as
@@ -258,7 +259,9 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
     column discovery fitted with, ``core.choose_alpha_window``) is recorded in ``discovery.acceleration`` only:
     no twin input depends on it (the twin derives its own accelerations, ``hd_twin.data``; the found terms and
     the recalibrated T_C, b_visc, eps_omega are functions of speed, angle and current, and J_eq and the timing
-    coefficient J tau_a are not written), so the twin needs no entry for it."""
+    coefficient J tau_a are not written), so the twin needs no entry for it. ``twist_window`` (theta_f's smoothing
+    for the twist of the Q_red terms, ``core.choose_twist_window``; 0: as logged) is recorded in
+    ``discovery.twist_window_samples``: the Q_red terms were fitted on that twist; no twin node smooths theta_f yet."""
     # the twin evaluates static terms sample by sample: a term on a pre-sliding state (a path history) goes
     # in its static form (hd_ground.discovery.core.static_term); one without such a form stays in the report
     new_terms, dropped = [], []
@@ -314,6 +317,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
         cfg["speed_timing"] = timing  # physics-only version: the terms are evaluated on the speeds they were fitted on
     cfg["discovery"] = {"speed_timing": timing or "speeds used as logged",
                         "acceleration": dict(acceleration or {}),
+                        "twist_window_samples": int(twist_window),
                         "recalibrated": [k for k in ("T_C", "b_visc", "eps_omega") if k in params],
                         "baseline_refit": {r.signal: r.refit_baseline_params for r in results},
                         "network": "copied from the parent version, not retrained" if twin is not None else "none (physics-only model)"}
