@@ -311,11 +311,12 @@ def _match(k, want) -> bool:
     return (k[0], k[1], k[2]) == tuple(want[:3]) and (want[3] is None or (k[3] is not None and abs(k[3] - want[3]) < 1e-9))
 
 
-def _greedy(bags: list[str], signal: str) -> dict:
-    """The plain greedy least-squares reference on the same bags, the last one held out."""
+def _greedy(bags: list[str], signal: str, twist_window: int = 0) -> dict:
+    """The plain greedy least-squares reference on the same bags, the last one held out (``twist_window``: discover's
+    choice of theta_f's smoothing for the twist, ``report.json`` ``twist_window_samples``; Q_red only)."""
     from hd_bag import read_mission
     from hd_ground.discovery.core import Options, choose_alpha_window, choose_speed_timing, standstill_rows
-    from hd_ground.discovery.data import dataset_from_missions
+    from hd_ground.discovery.data import dataset_from_missions, with_smoothed_twist
     from hd_ground.discovery.greedy import greedy_discover
 
     ms = [read_mission(b) for b in bags]
@@ -327,6 +328,8 @@ def _greedy(bags: list[str], signal: str) -> dict:
         ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
             ms, [str(b) for b in bags], retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho,
             mode=ALPHA_WINDOW)[0]
+    if twist_window:  # ... and the same twist discover's Q_red models read (its choice on the fit bags)
+        ds = with_smoothed_twist(ds, twist_window)
     still = standstill_rows(ds, Options().standstill_sigmas)[0] if signal == "tau_m" else None
     return greedy_discover(ds, signal, ho, standstill=still)
 
@@ -434,7 +437,7 @@ def evaluate_world_case(world: str, effect: str | None, bags: list[str], expect:
                         log=lambda s: None, results_out=res)
     t_d = time.perf_counter() - t0
     t0 = time.perf_counter()
-    g = _greedy(bags, sig)
+    g = _greedy(bags, sig, int(rep.get("twist_window_samples", 0)) if sig == "Q_red" else 0)
     t_g = time.perf_counter() - t0
     keys = [(e["signal"], e["name"], e["variable"], e["order"]) for e in rep["effects"]
             if not (e["signal"] == "Q_red" and e["name"] in LAW_FINDINGS and world != "default"

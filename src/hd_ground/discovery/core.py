@@ -36,7 +36,7 @@ import numpy as np
 from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_state, vp_shape
 from hd_twin.terms import basis_matrix, evaluate_terms
 
-from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError
+from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, with_smoothed_twist
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
                       state_var)
 from .loopshape import refine_loop_shape, twist_state_of
@@ -157,6 +157,9 @@ class Options:
     # as the acceleration is, with the state's timing against the torque profiled jointly) or "raw" (on the raw
     # columns, the ninth pass's behaviour)
     presliding_fit: str = "filtered"
+    # the twist's output-angle smoothing (choose_twist_window): "identify" (as logged, or a quadratic
+    # Savitzky-Golay smoother of 5-33 samples of theta_f when identified on the fit bags), "default" (as logged)
+    twist_window: str = "identify"
 
 
 @dataclass
@@ -1142,6 +1145,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
                                    twin_params=twin_params, opt=opt, presliding=rep)
     cv_folds = gram.cv_sse(_model(base_idx, groups, sel))
+    held_closed: set[str] = set()
     # the final shapes' uncertainty by variable projection on the cross-validated residuals (sandwich), and
     # whether a least-squares refinement of the same CV objective runs into a degenerate optimum (reported)
     for gi in sel:
@@ -1228,6 +1232,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                           f"{e['contribution']:+.1%}, {e['contribution_z']:.1f} paired SE; alone {e['explained']:+.1%}): "
                           "not an effect")
         sel = [g for g in sel if g != gi]
+        sel = _reselect_without_heldout_drop(gram, base_idx, groups, opt, sel, gi, trace, closed, held_closed,
+                                             reshape, confirm, statements)
     terms = [terms[i] for i in order]
     declared_after = list(declared)
     for e in effects:
@@ -1272,6 +1278,33 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         offsets=offsets, comparisons=comp, plot=plot, cv_folds=cv_folds,
     )
 
+
+
+def _reselect_without_heldout_drop(gram, base_idx, groups, opt, sel, gi, trace, closed, held_closed, reshape, confirm,
+                                   statements) -> list[int]:
+    """After the held-out arbiter dropped group ``gi``: when ``gi``'s entry had displaced selected groups (a drop
+    from the model after ``gi`` was added, in the selection trace), the selection is made again on the fit blocks
+    without ``gi``'s family, as after a group whose shape is not identified: a group that does not generalise must
+    not have steered which others stay. Returns the selection to score (``sel`` itself when nothing was displaced).
+    The held-out data only veto, as before; what enters is chosen by the fit blocks' CV."""
+    cand = groups[gi][0]
+    label = f"{cand.name}[{cand.family}]"
+    added = [i for i, r in enumerate(trace) if r.get("step") == "add" and r.get("candidate") == label]
+    if not added:
+        return sel
+    displaced = [r for r in trace[added[-1] + 1:] if r.get("step", "").startswith("drop (unidentified)")
+                 or r.get("step") == "drop"]
+    if not displaced:
+        return sel
+    held_closed.add(cand.family)
+    sel2, tr2 = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm,
+                              closed=set(closed) | held_closed)
+    trace.append({"step": "reselect (held-out drop)", "closed": sorted(held_closed),
+                  "displaced": [r["candidate"] for r in displaced]})
+    trace += tr2
+    statements.append(f"{label} had displaced {sorted({r['candidate'] for r in displaced})} from the model: selection made "
+                      f"again on the fit blocks without {sorted(held_closed)}")
+    return sel2
 
 
 def heldout_gain_z(r_without: np.ndarray, r_with: np.ndarray, n_chunks: int = 20) -> float:
@@ -1524,3 +1557,91 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
                 else "no alternative lowers the CV error")
     return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms, no timing column) "
                 f"is kept ({best_txt}; {stats})")
+
+
+def twist_model_cv_folds(ds: Dataset, heldout: np.ndarray, terms: list[dict] | None = None,
+                         declared: list[str] | None = None, extra_terms: list[dict] | None = None
+                         ) -> tuple[np.ndarray, float] | None:
+    """Per-block leave-one-block-out SSE on the fit bags of a Q_red model with its coefficients refitted: the
+    baseline (K w + c w' - J_out alpha_f, :func:`baseline_columns`) plus the basis of each of ``terms`` (the
+    effects a discovery selected; none: the plain baseline); and its CV RMSE. None when Q_red or the twist is
+    missing."""
+    if "Q_red" not in ds.signals or "windup" not in ds.signals:
+        return None
+    fit = ~heldout
+    if fit.sum() < Options().min_samples or len(np.unique(ds.block[fit])) < 3:
+        return None
+    sig = StateSignals(ds.signals, (ds.signals, ds.segment, {}), np.arange(ds.n)).rows_of(fit)
+    avail = {k for k, v in sig.items() if np.std(v) > 0}
+    if "windup" not in avail:
+        return None
+    X = [_baseline_matrix(baseline_columns("Q_red", avail, list(declared or []), list(extra_terms or []), 1.0, {})[0],
+                          sig)]
+    X += [basis_matrix(t["basis"], sig) for t in (terms or [])]
+    X = np.concatenate(X, 1)
+    sse = _BlockGram(X, sig["Q_red"], ds.block[fit]).cv_sse(list(range(X.shape[1])))
+    return sse, float(np.sqrt(sse.sum() / fit.sum()))
+
+
+def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
+                        windows: tuple[int, ...] = (5, 9, 17, 33), terms: list[dict] | None = None,
+                        declared: list[str] | None = None, extra_terms: list[dict] | None = None
+                        ) -> tuple[Dataset, str]:
+    """The twist as logged or through a smoothed output angle (:func:`data.with_smoothed_twist`), chosen on the fit bags.
+
+    The twist w = theta_m / N - theta_f is the regressor of every Q_red model; where the output encoder's step is
+    a large part of it, its quantisation error is an error in the variable that no term can fit and that bends
+    the identified torsion law (a dead-zone law then beats the true cubic on the fit missions and extrapolates
+    worse: docs/DISCOVERY_PASSES.md, twelfth pass). Candidates: quadratic Savitzky-Golay smoothers of
+    ``windows`` samples (doubling from the shortest). The reference model is the one the data selected with the
+    logged twist (``terms``: its effects; the pipeline runs the Q_red discovery once as logged first), refitted
+    on each twist: the plain baseline would credit a smoother for removing the output motion of an effect it
+    does not model yet (a kinematic-error ripple at twice the motor's rotation passes into theta_f). The one with
+    the lowest cross-validated error replaces the logged twist only when it is identified against it, by the
+    rule of :func:`choose_alpha_window` (CV mean squared error lower by ``opt.min_gain``, in at least
+    ``opt.fold_majority`` of the blocks, at least one paired standard error, and not on the longest window tried).
+    Returns the dataset and a statement (empty when nothing was tested)."""
+    opt = opt or Options()
+    if opt.twist_window != "identify" or "theta_f" not in ds.signals:
+        return ds, ""
+
+    def folds(d):
+        return twist_model_cv_folds(d, heldout, terms, declared, extra_terms)
+    base = folds(ds)
+    if base is None:
+        return ds, ""
+    sse_d, cv_d = base
+    ref = "the plain Q_red baseline" if not terms else \
+        "the Q_red model selected with the logged twist (" + ", ".join(t["name"] for t in terms) + ")"
+    longest = max(windows)
+    best = (cv_d, 0, ds, sse_d)
+    tried = [f"as logged: {cv_d:.4g}"]
+    for w in windows:
+        d2 = with_smoothed_twist(ds, w)
+        r = folds(d2)
+        if r is None or len(r[0]) != len(sse_d):
+            continue
+        tried.append(f"{w} samples: {r[1]:.4g}")
+        if r[1] < best[0]:
+            best = (r[1], w, d2, r[0])
+    cv, w, d2, sse = best
+    if w == 0:
+        return ds, f"twist: as logged (no smoothing of theta_f lowers the CV error of {ref}; tried {'; '.join(tried)})"
+    gain = 1.0 - float(sse.sum() / sse_d.sum()) if sse_d.sum() > 0 else 0.0
+    fb = float(np.mean(sse < sse_d))
+    t_pair = _paired_t(sse_d, sse)
+    stats = (f"CV RMSE of {ref} {cv_d:.4g} -> {cv:.4g} N*m, {gain:+.1%}, better in {fb:.0%} of the "
+             f"blocks, {t_pair:.1f} paired SE; tried {'; '.join(tried)}")
+    why = []
+    if gain < opt.min_gain:
+        why.append(f"gain < {opt.min_gain:.0%}")
+    if fb < opt.fold_majority:
+        why.append(f"better in < {opt.fold_majority:.0%} of the blocks")
+    if t_pair < 1.0:
+        why.append("within one standard error")
+    if w == longest:
+        why.append(f"on the longest window tried ({longest} samples): only bounded, not identified")
+    if not why:
+        return d2, (f"twist: theta_f smoothed (quadratic Savitzky-Golay, {w} samples) before the twist "
+                    f"theta_m / N - theta_f, identified on the fit bags ({stats}); used for Q_red")
+    return ds, f"twist: as logged (best smoothing {w} samples: {'; '.join(why)}; {stats})"

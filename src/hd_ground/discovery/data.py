@@ -41,6 +41,8 @@ class Dataset:
     speed_lags: dict[str, float] = field(default_factory=dict)  # speed -> identified delay (s) it was re-timed by
     # the acceleration used when not the default (core.choose_alpha_window): {"window_s", "timing"}
     alpha_window: dict = field(default_factory=dict)
+    # the output angle's smoothing window in samples for the twist (core.choose_twist_window; 0: as logged)
+    twist_window: int = 0
 
     @property
     def n(self) -> int:
@@ -49,7 +51,8 @@ class Dataset:
     def subset(self, mask: np.ndarray) -> "Dataset":
         return Dataset({k: v[mask] for k, v in self.signals.items()}, self.bag[mask], self.block[mask],
                        self.tfrac[mask], self.t[mask], self.segment[mask], self.bag_names, self.gear_ratio,
-                       self.torque_constant, list(self.notes), dict(self.speed_lags), dict(self.alpha_window))
+                       self.torque_constant, list(self.notes), dict(self.speed_lags), dict(self.alpha_window),
+                       self.twist_window)
 
 
 def _lag_sums(omega: np.ndarray, theta: np.ndarray, t: np.ndarray, seg: np.ndarray,
@@ -264,6 +267,37 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = DEFAULT_ALPHA_WIND
     if np.any(np.isfinite(tw)) and "motor_winding" in m.temperatures:
         s["temperature_winding"] = tw
     return s, notes
+
+
+def with_smoothed_twist(ds: Dataset, window: int) -> Dataset:
+    """``ds`` with the twist read through a smoothed output angle: windup = theta_m / N - SG(theta_f).
+
+    SG: the centred quadratic Savitzky-Golay smoother of ``window`` samples (odd, >= 5), per segment (segments
+    not longer than the window keep the logged angle). The twist is a small difference of two encoder angles;
+    the output encoder's step (2 pi / 2^16 = 9.6e-5 rad for 16 bits) is a large fraction of it, and that
+    quantisation error in the regressor (errors in variables) is no white noise on Q_red: it biases the
+    twist-to-torque law's shape with the twist's distribution, differently per mission. The motor angle is
+    divided by N (its step with it), so only the output angle is smoothed; the twist rate (from the speeds) and
+    ``windup_q`` (the encoders' play, a model of the logged resolution) are unchanged. A quadratic smoother keeps
+    a motion that is locally quadratic over the window; whether it helps is decided on the fit bags
+    (``core.choose_twist_window``), never assumed. Returns a new dataset; ``ds`` is unchanged."""
+    from scipy.signal import savgol_filter
+
+    w = int(window)
+    if w < 5 or w % 2 == 0:
+        raise ValueError(f"twist smoothing window must be odd and >= 5 samples, got {window}")
+    sig = dict(ds.signals)
+    thf = np.asarray(sig["theta_f"], float)
+    sm = thf.copy()
+    for sgi in np.unique(ds.segment):
+        idx = np.flatnonzero(ds.segment == sgi)
+        if len(idx) > w:
+            sm[idx] = savgol_filter(thf[idx], w, 2)
+    sig["phi"] = sm - sig["theta_m"] / ds.gear_ratio
+    sig["windup"] = -sig["phi"]
+    out = Dataset(sig, ds.bag, ds.block, ds.tfrac, ds.t, ds.segment, ds.bag_names, ds.gear_ratio, ds.torque_constant,
+                  list(ds.notes), dict(ds.speed_lags), dict(ds.alpha_window), w)
+    return out
 
 
 def dataset_from_missions(missions: list[Mission], names: list[str] | None = None, *, blocks_per_bag: int = 5,

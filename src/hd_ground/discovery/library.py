@@ -287,6 +287,17 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                     f"K a_{ks} |w| sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (load-dependent amplitude)",
                     _harm_params("K_a", k), requires=(var, "windup"),
                 ))
+                # the same ripple through a hardening torsion law's local stiffness: a position error e(theta)
+                # inside the spring gives Q = f(w - e) ~ f(w) - f'(w) e, and with f = K w + k3 w^3 the
+                # f'(w) e part is K e (the plain ripple) plus 3 k3 w^2 e (this group, in its own family so
+                # that it can join the plain ripple); the data decide (CV + Wald) whether the law is curved
+                out.append(Candidate(
+                    _periodic_name(ctx.target, var, k, "plain"), f"{fam}:stiff", var, float(k),
+                    sin_cos_pair(var, float(k), {"op": "pow", "var": "windup", "p": 2.0}),
+                    f"K b_{ks} w^2 sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (the ripple through the "
+                    "torsion law's local stiffness)",
+                    _harm_params("K_b", k), requires=(var, "windup"),
+                ))
     return out
 
 

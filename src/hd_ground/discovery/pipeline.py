@@ -19,9 +19,9 @@ import numpy as np
 from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
-from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing, discover_signal,
-                   split_fit_heldout, static_term)
-from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions
+from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing,
+                   choose_twist_window, discover_signal, split_fit_heldout, static_term)
+from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions, with_smoothed_twist
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
 STRUCTURAL = {"inertia", "linear_stiffness", "structural_damping", "mesh_friction"}
@@ -134,6 +134,7 @@ def run_discovery(
 
     targets = signals or ["tau_m"] + (["Q_red"] if "Q_red" in ds.signals else [])
     results: list[SignalResult] = []
+    twist_window = 0  # theta_f's smoothing window for the twist of the Q_red models (0: as logged)
     for target in targets:
         if target not in ds.signals:
             log(f"{target}: not measured in these bags; skipped")
@@ -143,6 +144,16 @@ def run_discovery(
             decl = list(DEFAULT_DECLARED[target])
         log(f"{target}: discovering (declared: {decl or 'none'}) ...")
         res = discover_signal(ds, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
+        if target == "Q_red" and opt.twist_window != "default":
+            # the twist's output angle, smoothed or as logged, chosen on the fit bags with the model just selected
+            # (core.choose_twist_window); when a smoother is identified, the Q_red discovery is made again with it
+            ds_q, st_ = choose_twist_window(ds, ho, opt, terms=res.terms, declared=decl, extra_terms=extra)
+            if st_:
+                ds.notes.append(st_)
+                log(f"note: {st_}")
+            if ds_q is not ds:
+                res = discover_signal(ds_q, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
+                twist_window = int(ds_q.twist_window)
         results.append(res)
         if results_out is not None:
             results_out.append(res)
@@ -152,6 +163,8 @@ def run_discovery(
     if within_bag_check and ho_bags:
         # second, independent run: fit bags only, last time blocks of each held out
         fit_only = ds.subset(~np.isin(ds.bag, ho_bags))
+        if twist_window:
+            fit_only = with_smoothed_twist(fit_only, twist_window)
         ho2 = split_fit_heldout(fit_only, None, heldout_frac)
         for target in [r.signal for r in results if r.identifiable]:
             decl = [r.declared_before for r in results if r.signal == target][0]
@@ -161,8 +174,12 @@ def run_discovery(
                               "effects": [_effect_brief(e) for e in r2.effects], "heldout_frac": heldout_frac}
 
     report = build_report(results, split, ds, within, twin_dir, opt)
+    # the twist the Q_red models were fitted with (core.choose_twist_window): theta_f's smoothing window in
+    # samples, 0 as logged (also in the new twin's discovery block; no twin node smooths theta_f yet)
+    report["twist_window_samples"] = twist_window
     new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log,
-                                 speed_lags=ds.speed_lags, acceleration=report["acceleration"])
+                                 speed_lags=ds.speed_lags, acceleration=report["acceleration"],
+                                 twist_window=twist_window)
     report["twin_out"] = str(new_dir) if new_dir else None
     if plots and results:
         from .plots import plot_result
@@ -231,7 +248,7 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
 
 def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
                        retrain: bool, missions, log, speed_lags: dict | None = None,
-                       acceleration: dict | None = None) -> Path | None:
+                       acceleration: dict | None = None, twist_window: int = 0) -> Path | None:
     """Write the augmented model version (only when something was found).
 
     ``speed_lags`` (``Dataset.speed_lags``: the re-timing discovery used, empty when the speeds were used as
@@ -242,7 +259,9 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
     column discovery fitted with, ``core.choose_alpha_window``) is recorded in ``discovery.acceleration`` only:
     no twin input depends on it (the twin derives its own accelerations, ``hd_twin.data``; the found terms and
     the recalibrated T_C, b_visc, eps_omega are functions of speed, angle and current, and J_eq and the timing
-    coefficient J tau_a are not written), so the twin needs no entry for it."""
+    coefficient J tau_a are not written), so the twin needs no entry for it. ``twist_window`` (theta_f's smoothing
+    for the twist of the Q_red terms, ``core.choose_twist_window``; 0: as logged) is recorded in
+    ``discovery.twist_window_samples``: the Q_red terms were fitted on that twist; no twin node smooths theta_f yet."""
     # the twin evaluates static terms sample by sample: a term on a pre-sliding state (a path history) goes
     # in its static form (hd_ground.discovery.core.static_term); one without such a form stays in the report
     new_terms, dropped = [], []
@@ -298,6 +317,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
         cfg["speed_timing"] = timing  # physics-only version: the terms are evaluated on the speeds they were fitted on
     cfg["discovery"] = {"speed_timing": timing or "speeds used as logged",
                         "acceleration": dict(acceleration or {}),
+                        "twist_window_samples": int(twist_window),
                         "recalibrated": [k for k in ("T_C", "b_visc", "eps_omega") if k in params],
                         "baseline_refit": {r.signal: r.refit_baseline_params for r in results},
                         "network": "copied from the parent version, not retrained" if twin is not None else "none (physics-only model)"}
