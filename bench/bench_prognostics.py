@@ -127,9 +127,9 @@ def _run_folds(fold, items):
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
 PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth shape by AIC per fit)
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
-SPREAD = ["renewal"]  # the future exposure's variability in the prognosis (--exposure-spread; LifeModel.fit)
+SPREAD = ["renewal+rate"]  # the future exposure's variability in the prognosis (--exposure-spread; LifeModel.fit)
 RATE = ["mean"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
-NOISE = ["constant"]  # HI noise model (--noise; LifeModel.fit: constant, level-dependent, or by AIC per fit)
+NOISE = ["auto"]  # HI noise model (--noise; LifeModel.fit: constant, level-dependent, or by AIC per fit)
 FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
 
@@ -297,10 +297,11 @@ def main(argv=None) -> int:
                     help="the prognosis's rate of a unit's future exposure per mission: mean (default) or median of "
                          "its record's per-step rates (src/hd_prognostic/README.md, 'Dev-fleet coverage diagnosis'; "
                          "CSV datasets with exposure = time are unchanged)")
-    ap.add_argument("--exposure-spread", default="renewal", choices=("none", "renewal"),
-                    help="the future exposure's variability in the RUL: renewal (default; inverse-Gaussian passage "
-                         "time from the unit's per-step increment variance) or none (single-rate extrapolation)")
-    ap.add_argument("--noise", default="constant", choices=("constant", "level", "auto"),
+    ap.add_argument("--exposure-spread", default="renewal+rate", choices=("none", "renewal", "renewal+rate"),
+                    help="the future exposure's variability in the RUL: renewal+rate (default: the renewal spread and "
+                         "the sampling uncertainty of the unit's mean rate), renewal (inverse-Gaussian passage time from "
+                         "the unit's per-step increment variance) or none (single-rate extrapolation)")
+    ap.add_argument("--noise", default="auto", choices=("constant", "level", "auto"),
                     help="HI noise model: one sigma (constant), sigma sqrt(1 + kappa^2 L^2) growing with the latent "
                          "level (level), or the lower AIC of both in every fit (auto; training units only)")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),

@@ -1295,24 +1295,29 @@ class LifeModel:
         kinds = THRESHOLDS if threshold == "auto" else (threshold,)
         fams = PATHS if path == "auto" else (path,)
         noises = NOISES if noise == "auto" else (noise,)
-        allfits = {}
-        for f_ in fams:
-            for k in kinds:
-                for nz in noises:  # the level-dependent noise starts at the constant noise's optimum (nested)
-                    base = allfits.get((f_, k, "constant"))
-                    allfits[(f_, k, nz)] = ml(k, f_, nz=nz, start=None if base is None else
-                                              base["unpack"](base["r2"].x))
+        allfits = {(f_, k, noises[0]): ml(k, f_, nz=noises[0]) for f_ in fams for k in kinds}
         level_aic = None
         if crossing and failure_level is not None:  # the defined level vs a fitted one (AIC, training units)
             level_aic = {}
             for f_ in fams:
-                for nz in noises:
-                    fx = allfits[(f_, "observable", nz)]  # nested: the fitted level starts at the fixed one's optimum
-                    free = ml("observable", f_, fix_level=False, start=fx["unpack"](fx["r2"].x), nz=nz)
-                    level_aic[(f_, nz)] = {"fixed": fx["aic"], "fitted": free["aic"]}
-                    if free["aic"] < fx["aic"]:
-                        allfits[(f_, "observable", nz)] = free
-                        free["free_level"] = True
+                fx = allfits[(f_, "observable", noises[0])]  # nested: the fitted level starts at the fixed one's optimum
+                free = ml("observable", f_, fix_level=False, start=fx["unpack"](fx["r2"].x), nz=noises[0])
+                level_aic[(f_, noises[0])] = {"fixed": fx["aic"], "fitted": free["aic"]}
+                if free["aic"] < fx["aic"]:
+                    allfits[(f_, "observable", noises[0])] = free
+                    free["free_level"] = True
+        if len(noises) > 1:
+            # noise="auto": the level-dependent noise is fitted for the path and threshold the constant noise chose
+            # (one parameter more) and kept if its AIC is lower. From the same start as the constant fit, not from
+            # its optimum: a constant-noise optimum at a boundary (a threshold scatter of 0: the dev fold without
+            # EMA-0005) left the level fit in a worse local optimum (log-likelihood 6606 against 6647)
+            f0, k0, _ = min(allfits, key=lambda k: allfits[k]["aic"])
+            base = allfits[(f0, k0, "constant")]
+            lev = ml(k0, f0, fix_level=not base.get("free_level"), nz="level")
+            lev["free_level"] = base.get("free_level", False)
+            allfits[(f0, k0, "level")] = lev
+            if level_aic is not None:
+                level_aic[(f0, "level")] = level_aic[(f0, "constant")]
         for (f_, k, nz), v in allfits.items():
             if progress:
                 print(f"  path {f_}, threshold {k}, noise {nz}: log-likelihood {-v['r2'].fun:.2f}, AIC {v['aic']:.2f}",
@@ -1328,7 +1333,8 @@ class LifeModel:
         if n_draws > 0:
             if ngroups >= 3:
                 prior_txt = ("uniform on every standard deviation (s, s_a, sigma, threshold scatter, tau) and on "
-                             "rho; flat on the rest")
+                             "rho" + (" and on the noise's level factor kappa" if "log_kappa" in th else "")
+                             + "; flat on the rest")
 
                 def log_prior(xs):  # uniform on every standard deviation and on rho, flat on the rest
                     t, i_ = unpack(xs)
@@ -1342,7 +1348,8 @@ class LifeModel:
                 # deviation over the training records on the offset / observable-threshold scatters (HI units)
                 A_thr = 1.0 if kind == "latent" else hi_scale
                 prior_txt = (f"{ngroups} failures/units < 3: half-Cauchy on the between-unit scales (s: scale 1, "
-                             f"s_a: {hi_scale:.3g}, threshold scatter: {A_thr:.3g}), uniform on sigma, tau and rho")
+                             f"s_a: {hi_scale:.3g}, threshold scatter: {A_thr:.3g}), uniform on sigma, tau and rho"
+                             + (" and kappa" if "log_kappa" in th else ""))
                 notes.append("between-unit scatter from < 3 failures: proper half-Cauchy prior on its scales")
 
                 def hc(l, A):  # log half-Cauchy(0, A) density of exp(l), in the coordinate l (Jacobian exp(l))
@@ -1372,7 +1379,7 @@ class LifeModel:
             info["path"] = fam
         if len(fams) > 1:
             info["path_aic"] = {f_: float(min(v["aic"] for (g_, _, _), v in allfits.items() if g_ == f_)) for f_ in fams}
-        if len(noises) > 1:  # the noise model's AIC (best path and threshold of each)
+        if len(noises) > 1:  # the noise model's AIC (best path and threshold of each; level: the constant's choice)
             info["noise_aic"] = {nz: float(min(v["aic"] for (_, _, n_), v in allfits.items() if n_ == nz))
                                  for nz in noises}
         if len(fits) > 1:
@@ -1789,7 +1796,7 @@ class _UKF:
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
              progress: bool = False, n_draws: int = 20, threshold: str = "auto",
              failure_level: float | None = None, path: str = "power", failure_at: str = "interval",
-             noise: str = "constant") -> LifeModel:
+             noise: str = "constant", exposure_spread: str = "renewal") -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
@@ -1798,7 +1805,7 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
         try:
             fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
                                        threshold=threshold, failure_level=failure_level, path=path,
-                                       failure_at=failure_at, noise=noise)
+                                       failure_at=failure_at, noise=noise, exposure_spread=exposure_spread)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -1811,7 +1818,7 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
         m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
                           threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at,
-                          noise=m.fit_info.get("noise", "constant"))
+                          noise=m.fit_info.get("noise", "constant"), exposure_spread=exposure_spread)
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
         if "noise_aic" in fits[best].fit_info:
             m.fit_info["noise_aic"] = fits[best].fit_info["noise_aic"]
