@@ -18,7 +18,9 @@ Model (latent degradation path, population of units):
   law with dK ~ sqrt(a) integrated: finite-time blow-up at ``E_ref / r_i``); ``path="auto"`` fits both and keeps the
   lower AIC (per fit, never per scored unit); see :func:`_path_L`;
 * HI: ``y_ij = a_i + c L_i(E_ij) + e_ij``, per-unit offset ``a_i ~ N(a0, s_a^2)`` (marginalised
-  analytically), AR(1) residuals ``e_ij = rho e_i(j-1) + N(0, sigma^2)`` (prewhitened; rho fitted);
+  analytically), AR(1) residuals ``e_ij = rho e_i(j-1) + N(0, sigma^2)`` (prewhitened; rho fitted); or
+  (``noise="level"``, ``"auto"``: by AIC) a residual sd growing with the degradation, ``sigma sqrt(1 + kappa^2 L^2)``,
+  the standardised residuals ``e / s`` being the AR(1) chain (:meth:`_Batch._hstats`);
 * failure when ``L_i`` crosses the unit's threshold ``D_i``, ``ln D_i ~ N(0, s_D^2)`` (median threshold 1
   fixes the latent scale; ``c`` is the HI change at the median threshold);
 * inspection of quantity q: ``v = alpha_q + beta_q L_i + N(0, tau_q^2)`` (population-level map, fitted
@@ -1100,7 +1102,11 @@ class LifeModel:
         before, kept for models saved without the key) per-step rate of its record (:meth:`UnitHistory.rate`).
         ``exposure_spread``: ``renewal`` (default) draws the time to accrue the remaining exposure from the
         inverse-Gaussian first passage of the unit's i.i.d. per-step increments (:meth:`UnitHistory.rate_var`;
-        constant increments unchanged), ``none`` extrapolates at the single rate (models saved without the key).
+        constant increments unchanged), ``renewal+rate`` also draws each sample's mean rate from its sampling law
+        (:meth:`UnitHistory.rate_mean_var`), ``none`` extrapolates at the single rate (models saved without the key).
+        ``noise``: the HI noise model, ``constant`` (one sigma), ``level`` (sd ``sigma sqrt(1 + kappa^2 L^2)``,
+        ``theta["log_kappa"]``) or ``auto`` (the level model fitted for the path and threshold the constant noise
+        chose, the lower AIC kept; ``fit_info["noise"]``, ``fit_info["noise_aic"]``).
 
         ``path``: the latent path family, ``power`` (``r (E/E_ref)^b``), ``paris`` (crack-growth shape
         ``h(r E/E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1``: Paris' law with dK ~ sqrt(a) integrated, per-unit
