@@ -62,7 +62,7 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
                           seed=seed, threshold=THRESHOLD[0], failure_level=level,
                           path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0],
-                          exposure_spread=SPREAD[0])
+                          exposure_spread=SPREAD[0], noise=NOISE[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
@@ -127,8 +127,9 @@ def _run_folds(fold, items):
 DRAWS = [20]  # posterior parameter draws per fit (--draws)
 PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth shape by AIC per fit)
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
-SPREAD = ["renewal"]  # the future exposure's variability in the prognosis (--exposure-spread; LifeModel.fit)
+SPREAD = ["renewal+rate"]  # the future exposure's variability in the prognosis (--exposure-spread; LifeModel.fit)
 RATE = ["mean"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
+NOISE = ["auto"]  # HI noise model (--noise; LifeModel.fit: constant, level-dependent, or by AIC per fit)
 FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
 
@@ -296,9 +297,13 @@ def main(argv=None) -> int:
                     help="the prognosis's rate of a unit's future exposure per mission: mean (default) or median of "
                          "its record's per-step rates (src/hd_prognostic/README.md, 'Dev-fleet coverage diagnosis'; "
                          "CSV datasets with exposure = time are unchanged)")
-    ap.add_argument("--exposure-spread", default="renewal", choices=("none", "renewal"),
-                    help="the future exposure's variability in the RUL: renewal (default; inverse-Gaussian passage "
-                         "time from the unit's per-step increment variance) or none (single-rate extrapolation)")
+    ap.add_argument("--exposure-spread", default="renewal+rate", choices=("none", "renewal", "renewal+rate"),
+                    help="the future exposure's variability in the RUL: renewal+rate (default: the renewal spread and "
+                         "the sampling uncertainty of the unit's mean rate), renewal (inverse-Gaussian passage time from "
+                         "the unit's per-step increment variance) or none (single-rate extrapolation)")
+    ap.add_argument("--noise", default="auto", choices=("constant", "level", "auto"),
+                    help="HI noise model: one sigma (constant), sigma sqrt(1 + kappa^2 L^2) growing with the latent "
+                         "level (level), or the lower AIC of both in every fit (auto; training units only)")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),
                     help="Virkler only: override --failure-at (kept for older commands)")
     ap.add_argument("--workers", type=int, default=1)
@@ -312,6 +317,7 @@ def main(argv=None) -> int:
     FAILURE_AT[0] = args.failure_at
     RATE[0] = args.exposure_rate
     SPREAD[0] = args.exposure_spread
+    NOISE[0] = args.noise
     JOBS[0] = args.jobs
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -417,7 +423,7 @@ def _louo_subset(units, eols, args, name, level=None):
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed,
                           threshold="observable" if FAILURE_AT[0] == "crossing" else THRESHOLD[0],
                           failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0],
-                          exposure_spread=SPREAD[0])
+                          exposure_spread=SPREAD[0], noise=NOISE[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)

@@ -281,7 +281,8 @@ def _fit_life(args) -> int:
     for n in dict.fromkeys(notes):
         print(f"note: {n}", file=sys.stderr)
     m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws, threshold=args.threshold,
-                 failure_level=args.failure_level, path=args.path, failure_at=args.failure_at)
+                 failure_level=args.failure_level, path=args.path, failure_at=args.failure_at, noise=args.noise,
+                 exposure_spread=args.exposure_spread)
     m.to_json(args.out)
     fi = m.fit_info
     print(json.dumps({"exposure": m.exposure, "E_ref": m.E_ref, **m.to_json()["readable"],
@@ -293,6 +294,7 @@ def _fit_life(args) -> int:
                       "failure_at": fi.get("failure_at", "interval"), "failure_at_rule": fi.get("failure_at_rule"),
                       "level": fi.get("level"),
                       "level_aic": fi.get("level_aic"),
+                      "noise": fi.get("noise", "constant"), "noise_aic": fi.get("noise_aic"),
                       "parameter_draws": len(m.draws),
                       "parameter_draws_ess": fi.get("parameter_uncertainty", {}).get("ess")}, indent=1, default=float))
     print(f"wrote {args.out}")
@@ -437,6 +439,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "records run through its failure, the record at the failure time being the first at or past "
                         "the level, else interval (the failure definition decides, not a score; printed as "
                         "failure_at_rule)")
+    p.add_argument("--noise", choices=("constant", "level", "auto"), default="auto",
+                   help="HI noise model: one sigma (constant), sigma sqrt(1 + kappa^2 L^2) growing with the latent "
+                        "level L (level), or auto (the default, the bench's): the level-dependent noise fitted for the "
+                        "path and threshold the constant noise chose, the lower AIC kept")
+    p.add_argument("--exposure-spread", choices=("none", "renewal", "renewal+rate"), default="renewal+rate",
+                   help="the future exposure's variability in the prognosis: renewal+rate (the default, the bench's: "
+                        "the renewal spread of the unit's per-step increments and its mean rate's sampling "
+                        "uncertainty), renewal, or none")
     p.set_defaults(func=_guard(_fit_life))
     p = s.add_parser("features", help="monotonicity/separability of the health features on a simulated fleet")
     p.add_argument("fleet_dir")

@@ -18,7 +18,9 @@ Model (latent degradation path, population of units):
   law with dK ~ sqrt(a) integrated: finite-time blow-up at ``E_ref / r_i``); ``path="auto"`` fits both and keeps the
   lower AIC (per fit, never per scored unit); see :func:`_path_L`;
 * HI: ``y_ij = a_i + c L_i(E_ij) + e_ij``, per-unit offset ``a_i ~ N(a0, s_a^2)`` (marginalised
-  analytically), AR(1) residuals ``e_ij = rho e_i(j-1) + N(0, sigma^2)`` (prewhitened; rho fitted);
+  analytically), AR(1) residuals ``e_ij = rho e_i(j-1) + N(0, sigma^2)`` (prewhitened; rho fitted); or
+  (``noise="level"``, ``"auto"``: by AIC) a residual sd growing with the degradation, ``sigma sqrt(1 + kappa^2 L^2)``,
+  the standardised residuals ``e / s`` being the AR(1) chain (:meth:`_Batch._hstats`);
 * failure when ``L_i`` crosses the unit's threshold ``D_i``, ``ln D_i ~ N(0, s_D^2)`` (median threshold 1
   fixes the latent scale; ``c`` is the HI change at the median threshold);
 * inspection of quantity q: ``v = alpha_q + beta_q L_i + N(0, tau_q^2)`` (population-level map, fitted
@@ -73,6 +75,10 @@ EVENT_KINDS = ("failure", "removal", "inspection")
 EVENT_COLUMNS = ("actuator_id", "mission_index", "event", "quantity", "value")
 EXPOSURES = ("missions", "hours", "load")
 THRESHOLDS = ("latent", "observable")  # where the failure threshold sits (LifeModel.fit(threshold=...))
+#: the future exposure's variability in the prognosis (LifeModel.fit(exposure_spread=...)): none, the renewal
+#: spread of the unit's i.i.d. increments, or that plus the sampling uncertainty of its mean rate
+SPREADS = ("none", "renewal", "renewal+rate")
+NOISES = ("constant", "level")  # HI noise model (LifeModel.fit(noise=...)): one sigma, or growing with the level
 MIN_INSPECTIONS = 4  # per quantity, fleet-wide, to fit its (alpha, beta, tau) map
 _LOG2PI = math.log(2 * math.pi)
 
@@ -219,6 +225,16 @@ class UnitHistory:
         m = float(np.sum(dE[ok]) / np.sum(dt[ok]))
         v = float(np.sum((dE[ok] - m * dt[ok]) ** 2) / np.sum(dt[ok]) * n / (n - 1))
         return v if m > 0 and v > (1e-6 * m) ** 2 else 0.0
+
+    def rate_mean_var(self) -> float:
+        """Sampling variance of the mean rate (:meth:`rate` ``mean``) under the same model as :meth:`rate_var`:
+        ``v / sum dt`` over the known increments (for unit steps: the per-step variance over their number n, i.e.
+        sd = cv m / sqrt(n)); 0 where :meth:`rate_var` is 0."""
+        v = self.rate_var()
+        if v <= 0:
+            return 0.0
+        dt, _, ok = self._increments()
+        return v / float(np.sum(dt[ok]))
 
     def _increments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per-step time and exposure increments of the record and the steps with a known one (dt > 0, dE >= 0)."""
@@ -518,19 +534,83 @@ class _Batch:
         bc = lambda w: np.bincount(self.idx, w, self.U)  # noqa: E731
         self.Sgg, self.Sgu, self.Suu = bc(g * g), bc(g * u), bc(u * u)
         self._pg, self._pu = g, u
-        if getattr(self, "_sum", None) is None:  # z-free structure of the records (kept across b, rho)
-            N = len(self.idx)
-            ends = np.searchsorted(self.idx, np.arange(self.U + 1))
-            # per-unit sums as one sparse (units x records) product: each unit's records summed in order, with
-            # no other unit's values in its sum (a running sum across units would lose the digits of a unit
-            # next to one near its blow-up)
-            self._sum = sparse.csr_matrix((np.ones(N), np.arange(N), ends), shape=(self.U, N))
-            self._starts = np.flatnonzero(~self.link)
-            self._lxmax = np.full(self.U, -np.inf)  # largest log exposure per unit (the record nearest blow-up)
-            np.maximum.at(self._lxmax, self.idx, self.lx)
+        self._records()
         self._zc = None
         self.rho = rho
         self._b = (b, rho)
+
+    def _records(self) -> None:
+        """z-free structure of the records, built once (kept across b, rho): the per-unit sum operator, the
+        chain starts and each unit's largest log exposure."""
+        if getattr(self, "_sum", None) is not None:
+            return
+        N = len(self.idx)
+        ends = np.searchsorted(self.idx, np.arange(self.U + 1))
+        # per-unit sums as one sparse (units x records) product: each unit's records summed in order, with
+        # no other unit's values in its sum (a running sum across units would lose the digits of a unit
+        # next to one near its blow-up)
+        self._sum = sparse.csr_matrix((np.ones(N), np.arange(N), ends), shape=(self.U, N))
+        self._starts = np.flatnonzero(~self.link)
+        self._lxmax = np.full(self.U, -np.inf)  # largest log exposure per unit (the record nearest blow-up)
+        np.maximum.at(self._lxmax, self.idx, self.lx)
+
+    def _hstats(self, z: np.ndarray, th: dict, b: float):
+        """Level-dependent HI noise (``log_kappa`` in ``th``): record j's residual has the scale
+        ``sigma s_j``, ``s_j = sqrt(1 + kappa^2 L_j^2)`` with ``L_j`` the latent path at that record and z, and
+        the standardised residuals ``e_j / s_j`` are the AR(1) chain. Prewhitened per record and grid point:
+        u = y/s - rho y'/s', g = 1/s - rho/s', x~ = L/s - rho L'/s' (at a chain start sqrt(1 - rho^2) times
+        y/s, 1/s, L/s); returns per unit and grid point sum g g, sum g e, sum e e with e = u - a0 g - c x~,
+        sum g (u - c x~) (for :meth:`a_post`), sum ln s_j (the Jacobian of the scaling) and whether a record
+        lies past a crack-growth path's blow-up."""
+        self._records()
+        rho = math.tanh(th.get("atanh_rho", 0.0))
+        kap = math.exp(th["log_kappa"])
+        key = (id(z), z.shape, tuple(sorted(th.items())), b)
+        hc = getattr(self, "_hc", None)
+        if hc is not None and hc[0] == key and hc[1] is z:
+            return hc[2]
+        shp = (len(self.idx), z.shape[1])
+        buf = self._hbuf if getattr(self, "_hbuf", None) is not None and self._hbuf[0].shape == shp else None
+        if buf is None:  # work arrays kept between calls (same grid size)
+            buf = self._hbuf = (np.empty(shp), np.empty(shp), np.empty(shp), np.empty((shp[0], 4, shp[1])))
+        A, B, C, V = buf
+        if self.path == "power":  # L = exp(z) (E/E_ref)^b, in place
+            np.take(np.exp(z), self.idx, axis=0, out=A)
+            A *= np.exp(b * self.lx)[:, None]
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):
+                A[:] = _path_L(self.path, np.take(z, self.idx, axis=0), self.lx[:, None], th)
+        np.minimum(A, 1e150, out=A)  # (a crack-growth path near its blow-up: finite; such z are dropped below)
+        np.multiply(A, kap, out=B)
+        B *= B  # (kappa L)^2
+        np.log1p(B, out=V[:, 3])
+        V[:, 3] *= 0.5  # ln s
+        B += 1.0
+        np.sqrt(B, out=B)
+        np.reciprocal(B, out=B)  # 1 / s
+        A *= -th["c"]
+        A += (self.y - th["a0"])[:, None]
+        A *= B  # (y - a0 - c L) / s: the standardised residual at a = a0
+        k0 = math.sqrt(1.0 - rho * rho)
+        st = self._starts
+        # prewhiten along each unit's chains: e (residual) into C, g (offset regressor 1/s) into A
+        np.multiply(A[:-1], rho, out=C[1:])
+        np.subtract(A[1:], C[1:], out=C[1:])
+        C[st] = k0 * A[st]
+        np.multiply(B[:-1], rho, out=A[1:])
+        np.subtract(B[1:], A[1:], out=A[1:])
+        A[st] = k0 * B[st]
+        np.multiply(A, A, out=V[:, 0])
+        np.multiply(A, C, out=V[:, 1])
+        np.multiply(C, C, out=V[:, 2])
+        N, n = shp
+        S = (self._sum @ V.reshape(N, -1)).reshape(self.U, 4, n)
+        blown = (np.exp(z + self._lxmax[:, None]) >= _PARIS_UMAX) if self.path != "power" else \
+            np.zeros(z.shape, bool)
+        # sum g (u - c x~) = sum g e + a0 sum g g
+        out = (S[:, 0], S[:, 1], S[:, 2], S[:, 1] + th["a0"] * S[:, 0], S[:, 3], blown)
+        self._hc = (key, z, out)
+        return out
 
     def _zstats(self, z: np.ndarray, th: dict, resid: bool = True):
         """Per unit and grid point, x~ the prewhitened latent path (Paris): sum g x~ and, with ``resid``, the
@@ -589,21 +669,27 @@ class _Batch:
         r = np.exp(z)
         f = -0.5 * ((z - mu) / s) ** 2 - math.log(s) - 0.5 * _LOG2PI
         n = self.n[:, None]
+        het = "log_kappa" in th  # level-dependent noise: the sums depend on z per record (_hstats)
         # residual e = u - a0 g - c r x~ of the prewhitened series; offset a - a0 ~ N(0, s_a^2) marginalised
-        Sw = (self.Suu - 2 * a0 * self.Sgu + a0 * a0 * self.Sgg)[:, None]
-        if self.path == "power":
+        if het:
+            Sgg, Sge, See, _, Slog, blown = self._hstats(z, th, b)
+        elif self.path == "power":
+            Sw = (self.Suu - 2 * a0 * self.Sgu + a0 * a0 * self.Sgg)[:, None]
             Sge = (self.Sgu - a0 * self.Sgg)[:, None] - c * r * self.SgX[:, None]
             Swx = (self.SuX - a0 * self.SgX)[:, None]
             See = Sw - 2 * c * r * Swx + c * c * r * r * self.SXX[:, None]
         else:
             _, Sge, See, blown = self._zstats(z, th)
         v2 = sig * sig
-        Sgg = self.Sgg[:, None]
+        if not het:
+            Sgg = self.Sgg[:, None]
         f = f - 0.5 * n * (_LOG2PI + math.log(v2)) - 0.5 * np.log1p(Sgg * sa * sa / v2) \
-            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge if self.path == "power"
+            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge if self.path == "power" and not het
                           else np.maximum(See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge, 0.0)) \
             + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho)  # Jacobian of the chain starts
-        if self.path != "power":
+        if het:
+            f = f - Slog  # Jacobian of the record scales s_j
+        if self.path != "power" or het:
             f = np.where(blown, -np.inf, f)
         for j, q in enumerate(self.quantities):
             m = insp.get(q)
@@ -642,6 +728,11 @@ class _Batch:
         rho = math.tanh(th.get("atanh_rho", 0.0))
         self.set_b(b, rho)
         sa, sig = math.exp(th["log_sa"]), math.exp(th["log_sigma"])
+        if "log_kappa" in th:  # level-dependent noise: z-dependent sums (_hstats)
+            Sgg, _, _, Sgw, _, _ = self._hstats(np.log(r) if z is None else z, th, b)
+            prec = 1.0 / sa ** 2 + Sgg / sig ** 2
+            m = (th["a0"] / sa ** 2 + Sgw / sig ** 2) / prec
+            return m, 1.0 / prec
         prec = 1.0 / sa ** 2 + self.Sgg[:, None] / sig ** 2
         cRgX = th["c"] * r * self.SgX[:, None] if self.path == "power" else \
             th["c"] * self._zstats(np.log(r) if z is None else z, th, resid=False)
@@ -663,7 +754,18 @@ class _Batch:
             ma, va = self.a_post(r, th, b, z)
             ma, va = ma[fl], va[fl]
             rn = (rho ** self.nf[fl])[:, None]
-            if self.path == "power":
+            if "log_kappa" in th:
+                # level-dependent noise: the standardised residual e/s carries on from the last record, so the
+                # residual at the failure time has mean (s_f / s_k) rn e_k and variance s_f^2 sigma^2 (1 - rn^2)
+                # / (1 - rho^2)
+                Lf = _path_L(self.path, z[fl], self.lhi[fl, None], th)
+                Lk = _path_L(self.path, z[fl], self.lx_last[fl, None], th)
+                kap = math.exp(th["log_kappa"])
+                sf2 = 1.0 + (kap * Lf) ** 2
+                q = rn * np.sqrt(sf2 / (1.0 + (kap * Lk) ** 2))
+                mf = ma * (1 - q) + c * (Lf - q * Lk) + q * self.y_last[fl, None]
+                vf = (1 - q) ** 2 * va + sf2 * sig * sig * (1 - rn * rn) / (1 - rho * rho)
+            elif self.path == "power":
                 Xf = np.exp(b * self.lhi[fl])[:, None]
                 Xk = np.exp(b * self.lx_last[fl])[:, None]
                 mf = ma * (1 - rn) + c * r[fl] * (Xf - rn * Xk) + rn * self.y_last[fl, None]
@@ -671,7 +773,8 @@ class _Batch:
                 Lf = _path_L(self.path, z[fl], self.lhi[fl, None], th)
                 Lk = _path_L(self.path, z[fl], self.lx_last[fl, None], th)
                 mf = ma * (1 - rn) + c * (Lf - rn * Lk) + rn * self.y_last[fl, None]
-            vf = (1 - rn) ** 2 * va + sig * sig * (1 - rn * rn) / (1 - rho * rho)
+            if "log_kappa" not in th:
+                vf = (1 - rn) ** 2 * va + sig * sig * (1 - rn * rn) / (1 - rho * rho)
             if self.crossing:
                 # the failure time is the time the measured HI reached the unit's level: density of that
                 # crossing time, p(Y_i = y(t_f)) |dy/dt| (Jacobian in log exposure; the exposure rate is data)
@@ -773,9 +876,9 @@ class _SubBatch(_Batch):
         self.qi, self.qu, self.qx, self.qv = base.qi[m], pos[base.qu[m]], base.qx[m], base.qv[m]
         self.path = base.path
         self.crossing = base.crossing
-        if self.path != "power":  # the records of these units (z-dependent sums are per record)
-            rec = pos[base.idx] >= 0
-            self.idx, self.lx, self.link, self.y = pos[base.idx[rec]], base.lx[rec], base.link[rec], base.y[rec]
+        # the records of these units (z-dependent sums are per record: Paris path, level-dependent noise)
+        rec = pos[base.idx] >= 0
+        self.idx, self.lx, self.link, self.y = pos[base.idx[rec]], base.lx[rec], base.link[rec], base.y[rec]
         self._b = None
 
     def set_b(self, b: float, rho: float = 0.0) -> None:
@@ -944,7 +1047,9 @@ class LifeModel:
                           **({"threshold_log_std": math.exp(self.theta["log_sD"])} if self.threshold == "latent"
                              else {"threshold_hi_median": self.theta["Y0"],
                                    "threshold_hi_std": math.exp(self.theta["log_sY"])}),
-                          "hi_noise_ar1": math.tanh(self.theta.get("atanh_rho", 0.0))}}
+                          "hi_noise_ar1": math.tanh(self.theta.get("atanh_rho", 0.0)),
+                          **({"hi_noise_level_kappa": math.exp(self.theta["log_kappa"])} if "log_kappa" in self.theta
+                             else {})}}
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
             Path(path).write_text(json.dumps(d, indent=1, default=float))
@@ -980,7 +1085,7 @@ class LifeModel:
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
             seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
             path: str = "power", failure_at: str = "interval", exposure_rate: str = "mean",
-            exposure_spread: str = "renewal") -> "LifeModel":
+            exposure_spread: str = "renewal", noise: str = "constant") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -997,7 +1102,11 @@ class LifeModel:
         before, kept for models saved without the key) per-step rate of its record (:meth:`UnitHistory.rate`).
         ``exposure_spread``: ``renewal`` (default) draws the time to accrue the remaining exposure from the
         inverse-Gaussian first passage of the unit's i.i.d. per-step increments (:meth:`UnitHistory.rate_var`;
-        constant increments unchanged), ``none`` extrapolates at the single rate (models saved without the key).
+        constant increments unchanged), ``renewal+rate`` also draws each sample's mean rate from its sampling law
+        (:meth:`UnitHistory.rate_mean_var`), ``none`` extrapolates at the single rate (models saved without the key).
+        ``noise``: the HI noise model, ``constant`` (one sigma), ``level`` (sd ``sigma sqrt(1 + kappa^2 L^2)``,
+        ``theta["log_kappa"]``) or ``auto`` (the level model fitted for the path and threshold the constant noise
+        chose, the lower AIC kept; ``fit_info["noise"]``, ``fit_info["noise_aic"]``).
 
         ``path``: the latent path family, ``power`` (``r (E/E_ref)^b``), ``paris`` (crack-growth shape
         ``h(r E/E_ref) / D0``, ``h(u) = (1 - u)^(-p) - 1``: Paris' law with dK ~ sqrt(a) integrated, per-unit
@@ -1018,8 +1127,10 @@ class LifeModel:
         the level; ``interval`` otherwise); the choice and its reason go to ``fit_info["failure_at_rule"]``."""
         if exposure_rate not in ("median", "mean"):
             raise ValueError(f"life-model fit: exposure_rate {exposure_rate!r} is not one of median, mean")
-        if exposure_spread not in ("none", "renewal"):
-            raise ValueError(f"life-model fit: exposure_spread {exposure_spread!r} is not one of none, renewal")
+        if exposure_spread not in SPREADS:
+            raise ValueError(f"life-model fit: exposure_spread {exposure_spread!r} is not one of {', '.join(SPREADS)}")
+        if noise not in NOISES + ("auto",):
+            raise ValueError(f"life-model fit: noise {noise!r} is not one of {', '.join(NOISES)}, auto")
         rule = None
         if failure_at == "auto":  # from the failure definition (level + records), never from a score
             failure_at, rule = failure_at_rule(units, failure_level)
@@ -1098,7 +1209,7 @@ class LifeModel:
                   for q in qs for k in ("alpha", "beta", "log_tau")]
         ix0 = [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")]
 
-        def setup(kind, fam="power", fix_level=True, start=None):
+        def setup(kind, fam="power", fix_level=True, start=None, nz="constant"):
             """(parameter names, start in the optimiser's coordinates, scale, unpack, nll) of one threshold kind."""
             batch = batches[fam]
             flevel = failure_level if fix_level else None
@@ -1127,6 +1238,10 @@ class LifeModel:
                     j = names.index("Y0")
                     names.pop(j)
                     scale.pop(j)
+            if nz == "level":  # level-dependent HI noise: kappa (start 1: the noise doubles by L = 1.7)
+                names = names + ["log_kappa"]
+                scale = scale + [1.0]
+                t0 = dict(t0, log_kappa=0.0)
             sc = np.array(scale + iscale)
             if start is not None:  # a nested model's optimum (theta, inspections) as the start
                 t0 = dict(t0, **start[0])
@@ -1160,6 +1275,8 @@ class LifeModel:
                     return 1e30
                 if fam == "paris" and not (-12 < th["mu"] < 12 and abs(th.get("log_D0", 0.0)) < 12):
                     return 1e30
+                if "log_kappa" in th and not -9 < th["log_kappa"] < 5:
+                    return 1e30
                 z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=windows)
                 with np.errstate(divide="ignore"):
                     lm = _lse(f) + np.log(dz)
@@ -1169,8 +1286,8 @@ class LifeModel:
 
             return names, x0, unpack, nll
 
-        def ml(kind, fam="power", fix_level=True, start=None):
-            names, xs0, unpack, nll = setup(kind, fam, fix_level, start)
+        def ml(kind, fam="power", fix_level=True, start=None, nz="constant"):
+            names, xs0, unpack, nll = setup(kind, fam, fix_level, start, nz)
             # quasi-Newton first (finite-difference gradients of a smooth quadrature), then a Nelder-Mead polish
             # (robust where the adaptive grid makes the finite differences noisy)
             r = optimize.minimize(nll, xs0, method="L-BFGS-B", options={"maxiter": 300, "eps": 1e-6})
@@ -1183,22 +1300,36 @@ class LifeModel:
 
         kinds = THRESHOLDS if threshold == "auto" else (threshold,)
         fams = PATHS if path == "auto" else (path,)
-        allfits = {(f_, k): ml(k, f_) for f_ in fams for k in kinds}
+        noises = NOISES if noise == "auto" else (noise,)
+        allfits = {(f_, k, noises[0]): ml(k, f_, nz=noises[0]) for f_ in fams for k in kinds}
         level_aic = None
         if crossing and failure_level is not None:  # the defined level vs a fitted one (AIC, training units)
             level_aic = {}
             for f_ in fams:
-                fx = allfits[(f_, "observable")]  # nested: the fitted level starts at the fixed one's optimum
-                free = ml("observable", f_, fix_level=False, start=fx["unpack"](fx["r2"].x))
-                level_aic[f_] = {"fixed": allfits[(f_, "observable")]["aic"], "fitted": free["aic"]}
-                if free["aic"] < allfits[(f_, "observable")]["aic"]:
-                    allfits[(f_, "observable")] = free
+                fx = allfits[(f_, "observable", noises[0])]  # nested: the fitted level starts at the fixed one's optimum
+                free = ml("observable", f_, fix_level=False, start=fx["unpack"](fx["r2"].x), nz=noises[0])
+                level_aic[(f_, noises[0])] = {"fixed": fx["aic"], "fitted": free["aic"]}
+                if free["aic"] < fx["aic"]:
+                    allfits[(f_, "observable", noises[0])] = free
                     free["free_level"] = True
-        for (f_, k), v in allfits.items():
+        if len(noises) > 1:
+            # noise="auto": the level-dependent noise is fitted for the path and threshold the constant noise chose
+            # (one parameter more) and kept if its AIC is lower. From the same start as the constant fit, not from
+            # its optimum: a constant-noise optimum at a boundary (a threshold scatter of 0: the dev fold without
+            # EMA-0005) left the level fit in a worse local optimum (log-likelihood 6606 against 6647)
+            f0, k0, _ = min(allfits, key=lambda k: allfits[k]["aic"])
+            base = allfits[(f0, k0, "constant")]
+            lev = ml(k0, f0, fix_level=not base.get("free_level"), nz="level")
+            lev["free_level"] = base.get("free_level", False)
+            allfits[(f0, k0, "level")] = lev
+            if level_aic is not None:
+                level_aic[(f0, "level")] = level_aic[(f0, "constant")]
+        for (f_, k, nz), v in allfits.items():
             if progress:
-                print(f"  path {f_}, threshold {k}: log-likelihood {-v['r2'].fun:.2f}, AIC {v['aic']:.2f}", flush=True)
-        fam, kind = min(allfits, key=lambda k: allfits[k]["aic"])
-        fits = {k: v for (f_, k), v in allfits.items() if f_ == fam}
+                print(f"  path {f_}, threshold {k}, noise {nz}: log-likelihood {-v['r2'].fun:.2f}, AIC {v['aic']:.2f}",
+                      flush=True)
+        fam, kind, nz_best = min(allfits, key=lambda k: allfits[k]["aic"])
+        fits = {k: v for (f_, k, nz), v in allfits.items() if f_ == fam and nz == nz_best}
         F = fits[kind]
         unpack, nll, r, r2 = F["unpack"], F["nll"], F["r"], F["r2"]
         th, ins = unpack(r2.x)
@@ -1208,11 +1339,12 @@ class LifeModel:
         if n_draws > 0:
             if ngroups >= 3:
                 prior_txt = ("uniform on every standard deviation (s, s_a, sigma, threshold scatter, tau) and on "
-                             "rho; flat on the rest")
+                             "rho" + (" and on the noise's level factor kappa" if "log_kappa" in th else "")
+                             + "; flat on the rest")
 
                 def log_prior(xs):  # uniform on every standard deviation and on rho, flat on the rest
                     t, i_ = unpack(xs)
-                    return (t["log_s"] + t["log_sa"] + t["log_sigma"] + t[thr_key]
+                    return (t["log_s"] + t["log_sa"] + t["log_sigma"] + t[thr_key] + t.get("log_kappa", 0.0)
                             + sum(v["log_tau"] for v in i_.values())
                             + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
             else:
@@ -1222,7 +1354,8 @@ class LifeModel:
                 # deviation over the training records on the offset / observable-threshold scatters (HI units)
                 A_thr = 1.0 if kind == "latent" else hi_scale
                 prior_txt = (f"{ngroups} failures/units < 3: half-Cauchy on the between-unit scales (s: scale 1, "
-                             f"s_a: {hi_scale:.3g}, threshold scatter: {A_thr:.3g}), uniform on sigma, tau and rho")
+                             f"s_a: {hi_scale:.3g}, threshold scatter: {A_thr:.3g}), uniform on sigma, tau and rho"
+                             + (" and kappa" if "log_kappa" in th else ""))
                 notes.append("between-unit scatter from < 3 failures: proper half-Cauchy prior on its scales")
 
                 def hc(l, A):  # log half-Cauchy(0, A) density of exp(l), in the coordinate l (Jacobian exp(l))
@@ -1231,7 +1364,7 @@ class LifeModel:
                 def log_prior(xs):
                     t, i_ = unpack(xs)
                     return (hc(t["log_s"], 1.0) + hc(t["log_sa"], hi_scale) + hc(t[thr_key], A_thr)
-                            + t["log_sigma"] + sum(v["log_tau"] for v in i_.values())
+                            + t["log_sigma"] + t.get("log_kappa", 0.0) + sum(v["log_tau"] for v in i_.values())
                             + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
 
             xd, pinfo = _posterior_draws(lambda xs: nll(xs) - log_prior(xs), r2.x, n_draws,
@@ -1251,7 +1384,10 @@ class LifeModel:
         if fam != "power":
             info["path"] = fam
         if len(fams) > 1:
-            info["path_aic"] = {f_: float(min(v["aic"] for (g_, _), v in allfits.items() if g_ == f_)) for f_ in fams}
+            info["path_aic"] = {f_: float(min(v["aic"] for (g_, _, _), v in allfits.items() if g_ == f_)) for f_ in fams}
+        if len(noises) > 1:  # the noise model's AIC (best path and threshold of each; level: the constant's choice)
+            info["noise_aic"] = {nz: float(min(v["aic"] for (_, _, n_), v in allfits.items() if n_ == nz))
+                                 for nz in noises}
         if len(fits) > 1:
             info["threshold_candidates"] = {k: float(-v["r2"].fun) for k, v in fits.items()}
             info["threshold_aic"] = {k: float(v["aic"]) for k, v in fits.items()}
@@ -1268,8 +1404,10 @@ class LifeModel:
         # time from the unit's per-step increment variance) or "none" (the single-rate extrapolation; models saved
         # without the key)
         info["exposure_spread"] = exposure_spread
+        # the HI noise model: "constant" (one sigma) or "level" (sigma sqrt(1 + kappa^2 L^2), theta["log_kappa"])
+        info["noise"] = nz_best
         if level_aic is not None:
-            info["level_aic"] = level_aic[fam]
+            info["level_aic"] = level_aic[(fam, nz_best)]
             info["level"] = "fitted" if F.get("free_level") else "fixed"
         return cls(th, E_ref, exposure, feature, ins, info, time_unit, draws=draws)
 
@@ -1332,31 +1470,39 @@ class LifeModel:
         rate = h.rate(self.fit_info.get("exposure_rate", "median"))
         if not (np.isfinite(rate) and rate > 0):
             rate = float(self.fit_info.get("rate_median", 1.0))
+        # the future exposure's own variability (renewal of i.i.d. increments, mean `rate`, variance `v` per time
+        # unit); with "renewal+rate" also the sampling uncertainty of the mean rate itself (per sample, normal with
+        # variance v / (time of the record's increments)). Models saved without the key: none.
+        spread = self.fit_info.get("exposure_spread", "none")
+        v = h.rate_var() if spread in ("renewal", "renewal+rate") else 0.0
+        rates = _rate_draws(rate, h.rate_mean_var() if spread == "renewal+rate" else 0.0, len(z), rng)
         if self.threshold == "observable":
-            return self._rul_observable(z, h, t_k, rate, rng)
+            return self._rul_observable(z, h, t_k, rate, rng, v=v, rates=rates)
         E_k = h.exposure_at(t_k)
         Ef = self.sample_failure_exposure(z, E_k, rng)
-        # the future exposure's own variability (renewal of i.i.d. increments, mean `rate`, variance `v` per time
-        # unit): the time to accrue D is the first passage of a Brownian motion with that drift and variance,
-        # inverse Gaussian (mean D / rate, shape D^2 / v), var = D v / rate^3. Models saved without the key: none.
-        v = h.rate_var() if self.fit_info.get("exposure_spread", "none") == "renewal" else 0.0
+        # the time to accrue D is the first passage of a Brownian motion with that drift and variance, inverse
+        # Gaussian (mean D / rate, shape D^2 / v), var = D v / rate^3
         if h.discrete:
             # failure is found at the start of the first step whose start exposure reaches E_f
             E1 = h.exposure_at(t_k + 1, rate)  # exposure at the start of the next step (its own known load)
-            return 1.0 + np.ceil(_passage_time(np.maximum(Ef - E1, 0.0), rate, v, rng))
-        return _passage_time(Ef - E_k, rate, v, rng)
+            return 1.0 + np.ceil(_passage_time(np.maximum(Ef - E1, 0.0), rates, v, rng))
+        return _passage_time(Ef - E_k, rates, v, rng)
 
     def _rul_observable(self, z: np.ndarray, h: UnitHistory, t_k: float, rate: float, rng: np.random.Generator,
-                        max_steps: int = 20000) -> np.ndarray:
+                        max_steps: int = 20000, v: float = 0.0, rates=None) -> np.ndarray:
         """Observable threshold: simulate the unit's future HI records from its posterior (z, then the offset a
         from its conditional normal given z and the record, the AR(1) residual carried on from the last record)
         until the HI passes its threshold Y, drawn from its law truncated to 'not passed by any record so far';
         RUL = time of the first record past Y (continuous time: interpolated between the two records; the future
-        record spacing is the unit's median spacing)."""
+        record spacing is the unit's median spacing). ``v`` > 0: the future exposure is the unit's renewal
+        process in its Brownian approximation (drift ``rates`` per sample, or ``rate``; variance ``v`` per time
+        unit), the counterpart of the latent threshold's inverse-Gaussian passage time; ``v`` = 0 extrapolates
+        at the rate."""
         th, b, c = self.theta, self.b, self.theta["c"]
         n = len(z)
         rho = math.tanh(th.get("atanh_rho", 0.0))
         sig = math.exp(th["log_sigma"])
+        kap = math.exp(th["log_kappa"]) if "log_kappa" in th else 0.0  # level-dependent noise (0: constant)
         sg = 1.0 if c >= 0 else -1.0
         ok = np.flatnonzero(np.isfinite(h.y))
         r = np.exp(z)
@@ -1366,8 +1512,10 @@ class LifeModel:
             a = ma[0] + np.sqrt(va[0]) * rng.standard_normal(n)
             j = ok[-1]
             t_last, yl = float(h.t[j]), float(h.y[j])
-            e = yl - a - (c * r * (max(h.E[j], 0.0) / self.E_ref) ** b if self.path == "power"
-                          else c * self.L(z, float(h.E[j])))
+            Lj = r * (max(h.E[j], 0.0) / self.E_ref) ** b if self.path == "power" else self.L(z, float(h.E[j]))
+            e = yl - a - c * Lj
+            if kap:  # level-dependent noise: the AR(1) chain is the standardised residual e / s
+                e = e / np.sqrt(1.0 + (kap * Lj) ** 2)
             M = float(np.max(sg * h.y[ok]))
         else:  # no HI yet: offset and residual from their population laws
             a = th["a0"] + math.exp(th["log_sa"]) * rng.standard_normal(n)
@@ -1387,10 +1535,27 @@ class LifeModel:
                                      else float(self.fit_info.get("record_spacing") or rate_scale(self, rate)))
         E_last = h.exposure_at(t_last)
 
-        def expo(tt):
-            if h.discrete and h.E_next is not None:
-                return h.E_next + (tt - t_last - 1.0) * rate
-            return E_last + (tt - t_last) * rate
+        known_next = h.discrete and h.E_next is not None  # the next step's exposure is known (its own load)
+        if rates is not None and np.ndim(rates) == 0:  # one rate: the single-rate extrapolation (+ spread v)
+            rate, rates = float(rates), None
+        m = np.full(n, rate) if rates is None else np.broadcast_to(np.asarray(rates, float), (n,))
+        W = np.zeros(n)  # per sample: the Brownian part of the future exposure accrued so far
+
+        def expo(tt, rows=None, i0=0):
+            """Exposure at times tt (the chunk's steps), per sample of ``rows`` when the spread is on."""
+            if v <= 0 and rates is None:  # (the arithmetic of the single-rate extrapolation: unchanged)
+                if known_next:
+                    return h.E_next + (tt - t_last - 1.0) * rate
+                return E_last + (tt - t_last) * rate
+            dtt = tt - t_last - (1.0 if known_next else 0.0)  # time of unknown increments at each step
+            base = (h.E_next if known_next else E_last) + m[rows, None] * dtt[None, :]
+            if v <= 0:
+                return base
+            inc = math.sqrt(v * dt) * rng.standard_normal((len(rows), len(tt)))
+            inc[:, (np.arange(len(tt)) + i0) < (1 if known_next else 0)] = 0.0  # the known first step
+            Wc = W[rows, None] + np.cumsum(inc, axis=1)
+            W[rows] = Wc[:, -1]
+            return base + Wc
 
         T = np.full(n, np.nan)
         alive = np.arange(n)
@@ -1399,17 +1564,21 @@ class LifeModel:
         while len(alive) and done < max_steps:
             k = min(chunk, max_steps - done)
             tt = t_last + dt * np.arange(done + 1, done + k + 1)
+            Et = expo(tt, alive, done)
+            Et = Et[None, :] if Et.ndim == 1 else Et
             if self.path == "power":
-                X = (np.maximum(expo(tt), 0.0) / self.E_ref) ** b
-                mean = a[alive, None] + c * r[alive, None] * X[None, :]
+                Lt = r[alive, None] * (np.maximum(Et, 0.0) / self.E_ref) ** b
             else:
-                mean = a[alive, None] + c * self.L(z[alive, None], expo(tt)[None, :])
+                Lt = self.L(z[alive, None], Et)
+            mean = a[alive, None] + c * Lt
             xi = sig * rng.standard_normal((len(alive), k))
             ee = np.empty_like(xi)
             ea = e[alive]
             for i in range(k):
                 ea = rho * ea + xi[:, i]
                 ee[:, i] = ea
+            if kap:
+                ee *= np.sqrt(1.0 + (kap * np.minimum(Lt, 1e150)) ** 2)
             yy = sg * (mean + ee)
             past = yy >= Yo[alive, None]
             hit = past.any(1)
@@ -1437,7 +1606,15 @@ class LifeModel:
         return tuple(float(np.exp(v) * X) for v in q)
 
 
-def _passage_time(D: np.ndarray, rate: float, v: float, rng: np.random.Generator) -> np.ndarray:
+def _rate_draws(rate: float, var: float, n: int, rng: np.random.Generator):
+    """The unit's mean exposure rate per sample: ``rate`` itself when ``var`` is 0 (no random draw), else normal
+    draws with that sampling variance (kept above 1 % of the estimate: a far tail of the normal approximation)."""
+    if var <= 0:
+        return rate
+    return np.maximum(rate + math.sqrt(var) * rng.standard_normal(n), 0.01 * rate)
+
+
+def _passage_time(D: np.ndarray, rate, v: float, rng: np.random.Generator) -> np.ndarray:
     """Time for the cumulative exposure to grow by ``D`` (per sample) at mean ``rate`` and variance ``v`` per time
     unit: ``D / rate`` when ``v == 0`` (no random draw), else the inverse-Gaussian first passage of the Brownian
     (normal) approximation of the renewal process of i.i.d. increments, mean ``D / rate``, var ``D v / rate^3``."""
@@ -1565,6 +1742,7 @@ class _UKF:
         th = model.theta
         self.model = model
         self.c, self.sig = th["c"], math.exp(th["log_sigma"])
+        self.kap = math.exp(th["log_kappa"]) if "log_kappa" in th else 0.0  # level-dependent noise
         self.rho = math.tanh(th.get("atanh_rho", 0.0))
         self.prev = None  # (y, X) of the previous finite record: AR(1) residuals are prewhitened
         self.x = np.array([th["mu"], th["a0"]])
@@ -1587,9 +1765,21 @@ class _UKF:
         Xs = np.vstack([self.x, self.x + S.T, self.x - S.T])
         rho = self.rho
         pw = self.model.path == "power" or E is None
+        kap = self.kap
+        if kap:  # level-dependent noise: records scaled by s = sqrt(1 + kappa^2 L^2) at the current mean of z
+            sc = lambda X_, E_: 1.0 / math.sqrt(1.0 + (kap * float(self._lat(np.array([self.x[0]]), X_, E_)[0])) ** 2)  # noqa: E731
         if self.prev is None:  # chain start: marginal variance sigma^2 / (1 - rho^2)
             Z = Xs[:, 1] + (self.c * np.exp(Xs[:, 0]) * X if pw else self.c * self._lat(Xs[:, 0], X, E))
             r2, meas = self.sig ** 2 / (1.0 - rho * rho), y
+            if kap:
+                w = sc(X, E)
+                Z, meas = Z * w, meas * w
+        elif kap:
+            yp, Xp, Ep = self.prev
+            w, wp = sc(X, E), sc(Xp, Ep)
+            Z = Xs[:, 1] * (w - rho * wp) + self.c * (self._lat(Xs[:, 0], X, E) * w
+                                                      - rho * wp * self._lat(Xs[:, 0], Xp, Ep))
+            r2, meas = self.sig ** 2, y * w - rho * yp * wp
         else:
             yp, Xp, Ep = self.prev
             Z = Xs[:, 1] * (1.0 - rho) + (self.c * np.exp(Xs[:, 0]) * (X - rho * Xp) if pw else
@@ -1611,7 +1801,8 @@ class _UKF:
 
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
              progress: bool = False, n_draws: int = 20, threshold: str = "auto",
-             failure_level: float | None = None, path: str = "power", failure_at: str = "interval") -> LifeModel:
+             failure_level: float | None = None, path: str = "power", failure_at: str = "interval",
+             noise: str = "constant", exposure_spread: str = "renewal") -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
@@ -1620,7 +1811,7 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
         try:
             fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
                                        threshold=threshold, failure_level=failure_level, path=path,
-                                       failure_at=failure_at)
+                                       failure_at=failure_at, noise=noise, exposure_spread=exposure_spread)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -1632,8 +1823,11 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     m = fits[best]
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
         m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
-                          threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at)
+                          threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at,
+                          noise=m.fit_info.get("noise", "constant"), exposure_spread=exposure_spread)
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
+        if "noise_aic" in fits[best].fit_info:
+            m.fit_info["noise_aic"] = fits[best].fit_info["noise_aic"]
         if "path_aic" in fits[best].fit_info:
             m.fit_info["path_aic"] = fits[best].fit_info["path_aic"]
     m.fit_info["exposure_candidates"] = {k: f.fit_info["log_likelihood"] for k, f in fits.items()}
