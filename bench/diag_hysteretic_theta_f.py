@@ -16,7 +16,9 @@ fit bags (0-2), RMSE on the held-out bag (3), each model with and without the cu
    Bouc-Wen state with linear unloading (phi = 0, the world's beta = gamma) at several distances, and of the
    true twist;
 4. the held-out residual of the Dahl model and of the true-z_h model by quintile of theta_f (where the
-   cubic's gain comes from).
+   cubic's gain comes from);
+5. the fit blocks' leave-one-block-out CV SSE of the discovered model (Dahl state of windup_q) with and
+   without the cubic, per block and bag, and over the blocks in which theta_f moves.
 """
 
 import argparse
@@ -36,7 +38,8 @@ def main(argv=None) -> int:
     ap.add_argument("bags", help="folder of the case's bags (the bench's hysteretic-robot/clean/bags)")
     ap.add_argument("--seed", type=int, default=1900)
     ap.add_argument("--family", default="hysteretic-robot")
-    ap.add_argument("--window", type=int, default=65, help="twist smoother (samples) for part 3")
+    ap.add_argument("--window", type=int, default=65, help="twist smoother (samples) for parts 3-5")
+    ap.add_argument("--d-h", type=float, default=1.03e-4, help="Dahl distance of part 5 (discover's identified one)")
     a = ap.parse_args(argv)
     from hd_bag import read_mission
     from hd_ground.discovery.data import dataset_from_missions, with_smoothed_twist
@@ -56,7 +59,10 @@ def main(argv=None) -> int:
     fs_sim = dec * float(unit.fs)
     zh, w_t = np.zeros(ds0.n), np.zeros(ds0.n)
     print(f"{a.family} seed {a.seed}: log {unit.fs:g} Hz, N {N:g}, J_L {unit.params.get('J_L'):.3g}, "
-          f"K_aero {unit.params.get('K_aero'):.4g}")
+          f"K_aero {unit.params.get('K_aero'):.4g}; encoders {unit.effects.p('encoder_quantisation', 'bits_m'):g} / "
+          f"{unit.effects.p('encoder_quantisation', 'bits_f'):g} bits (output step "
+          f"{2 * np.pi / 2 ** unit.effects.p('encoder_quantisation', 'bits_f'):.3g} rad), sigma_Q "
+          f"{unit.effects.p('sensor_noise', 'sigma_Q'):.2f} N*m, loop loss {unit.effects.p('hysteresis', 'loss_arcmin'):.3f} arcmin")
     print("1. truth: Q_red on [w, w', alpha_f, 1] | + z_h (RMSE N*m; the offset)")
 
     def ls(cols, y):
@@ -125,6 +131,34 @@ def main(argv=None) -> int:
             mm = [r[m][(th >= q[k]) & (th <= q[k + 1])].mean() for k in range(5)]
             print(f"     bag {b}: mean {r[m].mean():+7.2f} RMS {np.sqrt(np.mean(r[m] ** 2)):6.2f}; by quintile " +
                   " ".join(f"{v:+7.2f}" for v in mm))
+    print(f"5. leave-one-block-out CV SSE on the fit blocks, Dahl(windup_q, d {a.d_h:g}) model | + cubic(theta_f), "
+          f"per block (theta_f's span in it)")
+    st = presliding_state(s["windup_q"], a.d_h, ds.bag)
+    u = s["theta_f"] - s["theta_f"][fit].mean()
+    one = np.ones(ds.n)
+    res = {}
+    for name, cols in (("model", [w, wd, af, st]), ("cubic", [w, wd, af, st, one, u, u**2, u**3])):
+        X = np.stack(cols, 1)
+        for b in np.unique(ds.block[fit]):
+            te = ds.block == b
+            tr = fit & ~te
+            p = np.linalg.lstsq(X[tr], y[tr], rcond=None)[0]
+            res[name, b] = float(np.sum((y - X @ p)[te] ** 2))
+    step = float(np.min(np.diff(np.unique(np.round(s["theta_f"], 12)))))
+    moving = []
+    for b in np.unique(ds.block[fit]):
+        te = ds.block == b
+        span = float(np.ptp(s["theta_f"][te]))
+        moving.append(span > 1.5 * step)
+        print(f"   block {b:2d} (bag {ds.bag[te][0]}, span {span:.4f} rad): {res['model', b]:.4g} | {res['cubic', b]:.4g}")
+    blocks = np.unique(ds.block[fit])
+    for b_ in range(len(bags) - 1):
+        bl = [b for b in blocks if ds.bag[ds.block == b][0] == b_]
+        print(f"   bag {b_}: {sum(res['model', b] for b in bl):.4g} | {sum(res['cubic', b] for b in bl):.4g}")
+    mv = [b for b, m in zip(blocks, moving) if m]
+    m0, m1 = sum(res["model", b] for b in mv), sum(res["cubic", b] for b in mv)
+    print(f"   blocks where theta_f moves > 1.5 output counts ({len(mv)} of {len(blocks)}): gain {1 - m1 / m0:+.1%}, "
+          f"better in {np.mean([res['cubic', b] < res['model', b] for b in mv]):.0%}")
     return 0
 
 
