@@ -1600,7 +1600,11 @@ def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = 
     the lowest cross-validated error replaces the logged twist only when it is identified against it, by the
     rule of :func:`choose_alpha_window` (CV mean squared error lower by ``opt.min_gain``, in at least
     ``opt.fold_majority`` of the blocks, at least one paired standard error, and not on the longest window tried).
-    Returns the dataset and a statement (empty when nothing was tested)."""
+    ``extend`` (default): while the CV optimum is the longest window tried, the grid is extended by doubling
+    (2 w - 1: 65, 129, ...) up to a quarter of the shortest segment, so that an optimum beyond ``windows`` is
+    identified where the data show it (the CV error turning up) instead of only bounded (issue 10, thirteenth pass:
+    a 16-bit output encoder logged at 2 kHz wants 65 samples). Returns the dataset and a statement (empty when
+    nothing was tested)."""
     opt = opt or Options()
     if opt.twist_window != "identify" or "theta_f" not in ds.signals:
         return ds, ""
