@@ -1585,8 +1585,8 @@ def twist_model_cv_folds(ds: Dataset, heldout: np.ndarray, terms: list[dict] | N
 
 def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
                         windows: tuple[int, ...] = (5, 9, 17, 33), terms: list[dict] | None = None,
-                        declared: list[str] | None = None, extra_terms: list[dict] | None = None
-                        ) -> tuple[Dataset, str]:
+                        declared: list[str] | None = None, extra_terms: list[dict] | None = None,
+                        extend: bool = True) -> tuple[Dataset, str]:
     """The twist as logged or through a smoothed output angle (:func:`data.with_smoothed_twist`), chosen on the fit bags.
 
     The twist w = theta_m / N - theta_f is the regressor of every Q_red model; where the output encoder's step is
@@ -1600,7 +1600,11 @@ def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = 
     the lowest cross-validated error replaces the logged twist only when it is identified against it, by the
     rule of :func:`choose_alpha_window` (CV mean squared error lower by ``opt.min_gain``, in at least
     ``opt.fold_majority`` of the blocks, at least one paired standard error, and not on the longest window tried).
-    Returns the dataset and a statement (empty when nothing was tested)."""
+    ``extend`` (default): while the CV optimum is the longest window tried, the grid is extended by doubling
+    (2 w - 1: 65, 129, ...) up to a quarter of the shortest segment, so that an optimum beyond ``windows`` is
+    identified where the data show it (the CV error turning up) instead of only bounded (issue 10, thirteenth pass:
+    a 16-bit output encoder logged at 2 kHz wants 65 samples). Returns the dataset and a statement (empty when
+    nothing was tested)."""
     opt = opt or Options()
     if opt.twist_window != "identify" or "theta_f" not in ds.signals:
         return ds, ""
@@ -1613,10 +1617,15 @@ def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = 
     sse_d, cv_d = base
     ref = "the plain Q_red baseline" if not terms else \
         "the Q_red model selected with the logged twist (" + ", ".join(t["name"] for t in terms) + ")"
-    longest = max(windows)
     best = (cv_d, 0, ds, sse_d)
     tried = [f"as logged: {cv_d:.4g}"]
-    for w in windows:
+    windows = sorted(int(w) for w in windows)
+    # the shortest segment bounds the grid: a smoother as long as a segment leaves that segment as logged
+    seg_len = np.bincount(np.unique(ds.segment, return_inverse=True)[1]).min() if ds.n else 0
+    k = 0
+    while k < len(windows):
+        w = windows[k]
+        k += 1
         d2 = with_smoothed_twist(ds, w)
         r = folds(d2)
         if r is None or len(r[0]) != len(sse_d):
@@ -1624,6 +1633,11 @@ def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = 
         tried.append(f"{w} samples: {r[1]:.4g}")
         if r[1] < best[0]:
             best = (r[1], w, d2, r[0])
+        # an optimum on the end of the grid is only a bound: the grid is extended (doubling) until the CV
+        # error turns up, or the next window would reach a quarter of the shortest segment
+        if k == len(windows) and extend and best[1] == w and 2 * w - 1 <= seg_len // 4:
+            windows.append(2 * w - 1)
+    longest = max(windows)
     cv, w, d2, sse = best
     if w == 0:
         return ds, f"twist: as logged (no smoothing of theta_f lowers the CV error of {ref}; tried {'; '.join(tried)})"
