@@ -478,12 +478,14 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
     selected: list[int] = []  # indices into groups
     trace = [{"step": "baseline", "cv_sse": float(cur.sum())}]
     fams_used: set[str] = set(closed)
+    fams_skip: set[str] = set()  # inconsistent at this step only (reconsidered once the model has changed)
     while len(selected) < opt.max_effects:
         best = None
         per_fam: dict[str, list[tuple[int, np.ndarray]]] = {}
         fams_sel = {groups[g][0].family for g in selected}
         for gi, (cand, cols) in enumerate(groups):
-            if cand.family in fams_used or (getattr(cand, "after", None) and cand.after not in fams_sel):
+            if cand.family in fams_used or cand.family in fams_skip \
+                    or (getattr(cand, "after", None) and cand.after not in fams_sel):
                 continue
             if cand.shapes and reshape is not None and not reshape(gi, cur_idx):
                 continue
@@ -508,10 +510,18 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         cand = groups[gi][0]
         rec = {"step": "add?", "candidate": f"{cand.name}[{cand.family}]", "gain": float(gain), "folds_better": folds,
                "t": t}
-        if gain < opt.min_gain or folds < opt.fold_majority or t < opt.se_rule:
-            rec["step"] = "stop"
+        if gain < opt.min_gain:
+            rec["step"] = "stop"  # the best candidate's gain is too small: no other can be admitted
             trace.append(rec)
             break
+        if folds < opt.fold_majority or t < opt.se_rule:
+            # lowers the pooled CV error, but not in most blocks (or not by enough standard errors): not a
+            # consistent improvement, so this family is not admitted; the next best family may still be one
+            # (stopping here would let one inconsistent candidate hide every consistent one behind it)
+            rec["step"] = "reject (inconsistent)"
+            trace.append(rec)
+            fams_skip.add(cand.family)
+            continue
         tcols = _tcols(groups, gi)
         wald = gram.jackknife_wald(_model(base_idx, groups, selected + [gi]), tcols)
         rec["wald"] = wald
@@ -535,6 +545,7 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         trace.append(rec)
         selected.append(gi)
         fams_used.add(cand.family)
+        fams_skip.clear()
         cur_idx = _model(base_idx, groups, selected)
         cur = e
     # backward: drop groups that no longer earn their place
