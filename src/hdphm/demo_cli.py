@@ -83,7 +83,8 @@ def _fit_life(fleet: Path, train_ids: list[str], truth: dict, out_json: Path, ar
         units = [unit_history(a, "HF_MTW_IF", e) for a in acts]
         attach_events(units, ev, str(ev_path))
         cands[e] = units
-    m = fit_best(cands, feature="HF_MTW_IF")
+    # the future exposure's spread as `hdphm prognostic fit` has it by default (renewal + the mean rate's uncertainty)
+    m = fit_best(cands, feature="HF_MTW_IF", exposure_spread="renewal+rate")
     m.to_json(out_json)
     _say(f"    life model: clock '{m.exposure}' (maximum likelihood), {m.fit_info['n_failures']} failures")
     return m
