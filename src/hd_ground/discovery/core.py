@@ -1486,6 +1486,24 @@ def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.nda
                        "as logged")
 
 
+def _identified_against(sse_ref: np.ndarray, sse: np.ndarray, opt: Options) -> tuple[float, float, float, list[str]]:
+    """An alternative signal reading (derivative window, twist smoother) against the reference one, by the
+    selection's rules on the per-block CV SSE: (CV gain, fraction of blocks better, paired t, the rules it
+    fails: gain < ``opt.min_gain``, better in < ``opt.fold_majority`` of the blocks, within one standard error).
+    Shared by :func:`choose_alpha_window` and :func:`choose_twist_window`; each adds its own range-edge rule."""
+    gain = 1.0 - float(sse.sum() / sse_ref.sum()) if sse_ref.sum() > 0 else 0.0
+    folds = float(np.mean(sse < sse_ref))
+    t_pair = _paired_t(sse_ref, sse)
+    why = []
+    if gain < opt.min_gain:
+        why.append(f"gain < {opt.min_gain:.0%}")
+    if folds < opt.fold_majority:
+        why.append(f"better in < {opt.fold_majority:.0%} of the blocks")
+    if t_pair < 1.0:
+        why.append("within one standard error")
+    return gain, folds, t_pair, why
+
+
 def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
                         default_s: float = DEFAULT_ALPHA_WINDOW_S, mode: str | None = None) -> tuple[Dataset, str]:
     """The motor acceleration's timing (and, ``mode="identify"``, its derivative window), chosen on the fit bags.
@@ -1543,19 +1561,10 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
             if r[1] < best[0]:
                 best = (r[1], win, timing, d2, r[0])
     cv, win, timing, d2, sse = best
-    gain = 1.0 - float(sse.sum() / sse_d.sum()) if sse_d.sum() > 0 else 0.0
-    folds = float(np.mean(sse < sse_d))
-    t_pair = _paired_t(sse_d, sse)
+    gain, folds, t_pair, why = _identified_against(sse_d, sse, opt)
     what = f"{win * 1e3:.3g} ms" + (" with the inertia torque's timing (J tau_a dalpha_m/dt)" if timing else "")
     stats = (f"CV RMSE of the tau_m baseline {cv_d:.4g} -> {cv:.4g} N*m, {gain:+.1%}, better in {folds:.0%} of the "
              f"blocks, {t_pair:.1f} paired SE; tried {'; '.join(tried)}")
-    why = []
-    if gain < opt.min_gain:
-        why.append(f"gain < {opt.min_gain:.0%}")
-    if folds < opt.fold_majority:
-        why.append(f"better in < {opt.fold_majority:.0%} of the blocks")
-    if t_pair < 1.0:
-        why.append("within one standard error")
     if mode == "identify" and win == longest and win != default_s:
         why.append(f"on the longest window tried ({longest * 1e3:.3g} ms): only bounded, not identified")
     if d2 is not ds and not why:
@@ -1652,18 +1661,9 @@ def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = 
     cv, w, d2, sse = best
     if w == 0:
         return ds, f"twist: as logged (no smoothing of theta_f lowers the CV error of {ref}; tried {'; '.join(tried)})"
-    gain = 1.0 - float(sse.sum() / sse_d.sum()) if sse_d.sum() > 0 else 0.0
-    fb = float(np.mean(sse < sse_d))
-    t_pair = _paired_t(sse_d, sse)
+    gain, fb, t_pair, why = _identified_against(sse_d, sse, opt)
     stats = (f"CV RMSE of {ref} {cv_d:.4g} -> {cv:.4g} N*m, {gain:+.1%}, better in {fb:.0%} of the "
              f"blocks, {t_pair:.1f} paired SE; tried {'; '.join(tried)}")
-    why = []
-    if gain < opt.min_gain:
-        why.append(f"gain < {opt.min_gain:.0%}")
-    if fb < opt.fold_majority:
-        why.append(f"better in < {opt.fold_majority:.0%} of the blocks")
-    if t_pair < 1.0:
-        why.append("within one standard error")
     if w == longest:
         why.append(f"on the longest window tried ({longest} samples): only bounded, not identified")
     if not why:
