@@ -3,7 +3,10 @@
 Synthetic Q_red = K w + k3 w^3 + noise with the twist w = theta_m / N - theta_f logged through a 16-bit output
 encoder: the quantisation error of theta_f is an error in the regressor. Checks that the fit bags' Q_red baseline
 CV identifies a smoother, that it lowers the held-out error of the true law fitted on the twist, and that with an
-output encoder fine enough it leaves the twist as logged. A second or two."""
+output encoder fine enough it leaves the twist as logged. And (thirteenth pass) that the grid is extended while its
+CV optimum sits on the longest window: at 4 kHz with slow output motion the quantisation error is best averaged over
+more than 33 samples; with the fixed grid (5..33) the optimum is only bounded and the twist stays as logged, with the
+grid extended by doubling the CV error turns up inside the grid and the window is identified. A few seconds."""
 
 import numpy as np
 import pytest
@@ -14,17 +17,23 @@ from hd_ground.discovery.data import Dataset, with_smoothed_twist
 N, K, K3 = 100.0, 5.5e5, 1.0e11
 
 
-def _dataset(step_f: float, seed: int = 3) -> tuple[Dataset, np.ndarray]:
+def _dataset(step_f: float, seed: int = 3, fs: float = 1000.0, f1_range=(2.0, 3.0), f2_range=(0.5, 1.2),
+             ripple: bool = True, k3: float = K3) -> tuple[Dataset, np.ndarray]:
+    """Four 4 s bags; theta_f a sine (+ a small 8-12 Hz ripple when ``ripple``), the twist a slower sine;
+    Q_red = K w + k3 w^3 + noise; theta_f logged with the encoder step ``step_f`` (0: exact)."""
     rng = np.random.default_rng(seed)
-    fs, dur, n_bags, blocks = 1000.0, 4.0, 4, 5
+    dur, n_bags, blocks = 4.0, 4, 5
     cols: dict[str, list] = {k: [] for k in ("theta_m", "theta_f", "windup_dot", "alpha_f", "Q_red", "w_true")}
     bag, block, tfrac, tt, seg = [], [], [], [], []
     for b in range(n_bags):
         t = np.arange(int(fs * dur)) / fs
-        f1, f2, f3 = rng.uniform(2.0, 3.0), rng.uniform(0.5, 1.2), rng.uniform(8.0, 12.0)
-        th_f = 0.05 * np.sin(2 * np.pi * f1 * t + rng.uniform(0, 6)) + 0.002 * np.sin(2 * np.pi * f3 * t)
+        f1, f2 = rng.uniform(*f1_range), rng.uniform(*f2_range)
+        f3 = rng.uniform(8.0, 12.0) if ripple else 0.0
+        th_f = 0.05 * np.sin(2 * np.pi * f1 * t + rng.uniform(0, 6))
+        if ripple:
+            th_f = th_f + 0.002 * np.sin(2 * np.pi * f3 * t)
         w = (1.2e-3 + 0.6e-3 * b / n_bags) * np.sin(2 * np.pi * f2 * t + rng.uniform(0, 6))
-        q = K * w + K3 * w**3 + rng.normal(0, 1.0, len(t))
+        q = K * w + k3 * w**3 + rng.normal(0, 1.0, len(t))
         th_m = N * (th_f + w)
         th_f_log = np.round(th_f / step_f) * step_f if step_f > 0 else th_f
         cols["theta_m"].append(th_m)
@@ -47,9 +56,10 @@ def _dataset(step_f: float, seed: int = 3) -> tuple[Dataset, np.ndarray]:
     return ds, w_true
 
 
-def _heldout_rmse_true_law(ds: Dataset, ho: np.ndarray) -> float:
+def _heldout_rmse_true_law(ds: Dataset, ho: np.ndarray, cubic: bool = True) -> float:
     s = ds.signals
-    X = np.stack([s["windup"], s["windup"] ** 3, s["windup_dot"], s["alpha_f"]], 1)
+    cols = [s["windup"]] + ([s["windup"] ** 3] if cubic else []) + [s["windup_dot"], s["alpha_f"]]
+    X = np.stack(cols, 1)
     beta = _lstsq(X[~ho], s["Q_red"][~ho])
     return float(np.sqrt(np.mean((s["Q_red"] - X @ beta)[ho] ** 2)))
 
@@ -83,3 +93,19 @@ def test_off_and_bad_window():
     assert out is ds and note == ""
     with pytest.raises(ValueError, match="odd and >= 5"):
         with_smoothed_twist(ds, 4)
+
+
+def test_bounded_optimum_extends_the_grid_until_the_cv_error_turns_up():
+    ds, w_true = _dataset(2 * np.pi / 2**16, seed=5, fs=4000.0, f1_range=(0.3, 0.5), f2_range=(0.2, 0.4),
+                          ripple=False, k3=0.0)
+    ho = ds.bag == 3
+    fixed, note_fixed = choose_twist_window(ds, ho, Options(), extend=False)
+    assert fixed is ds and "only bounded" in note_fixed, note_fixed
+    out, note = choose_twist_window(ds, ho, Options())
+    assert out.twist_window > 33 and "identified on the fit bags" in note, note
+    # the chosen window is not the last one tried: the CV error turned up after it
+    assert f"{2 * out.twist_window - 1} samples:" in note, note
+    err = lambda d: np.sqrt(np.mean((d.signals["windup"] - w_true) ** 2))  # noqa: E731
+    d33 = with_smoothed_twist(ds, 33)
+    assert err(out) < 0.8 * err(d33) < 0.8 * err(ds)
+    assert _heldout_rmse_true_law(out, ho, cubic=False) < 0.8 * _heldout_rmse_true_law(d33, ho, cubic=False)
