@@ -582,7 +582,7 @@ class _Batch:
                 A[:] = _path_L(self.path, np.take(z, self.idx, axis=0), self.lx[:, None], th)
         np.minimum(A, 1e150, out=A)  # (a crack-growth path near its blow-up: finite; such z are dropped below)
         np.multiply(A, kap, out=B)
-        B *= B  # (kappa L)^2
+        B *= B  # (kappa L)^2 (_level_var, in place)
         np.log1p(B, out=V[:, 3])
         V[:, 3] *= 0.5  # ln s
         B += 1.0
@@ -761,8 +761,8 @@ class _Batch:
                 Lf = _path_L(self.path, z[fl], self.lhi[fl, None], th)
                 Lk = _path_L(self.path, z[fl], self.lx_last[fl, None], th)
                 kap = math.exp(th["log_kappa"])
-                sf2 = 1.0 + (kap * Lf) ** 2
-                q = rn * np.sqrt(sf2 / (1.0 + (kap * Lk) ** 2))
+                sf2 = _level_var(kap, Lf)
+                q = rn * np.sqrt(sf2 / _level_var(kap, Lk))
                 mf = ma * (1 - q) + c * (Lf - q * Lk) + q * self.y_last[fl, None]
                 vf = (1 - q) ** 2 * va + sf2 * sig * sig * (1 - rn * rn) / (1 - rho * rho)
             elif self.path == "power":
@@ -1515,7 +1515,7 @@ class LifeModel:
             Lj = r * (max(h.E[j], 0.0) / self.E_ref) ** b if self.path == "power" else self.L(z, float(h.E[j]))
             e = yl - a - c * Lj
             if kap:  # level-dependent noise: the AR(1) chain is the standardised residual e / s
-                e = e / np.sqrt(1.0 + (kap * Lj) ** 2)
+                e = e / np.sqrt(_level_var(kap, Lj))
             M = float(np.max(sg * h.y[ok]))
         else:  # no HI yet: offset and residual from their population laws
             a = th["a0"] + math.exp(th["log_sa"]) * rng.standard_normal(n)
@@ -1578,7 +1578,7 @@ class LifeModel:
                 ea = rho * ea + xi[:, i]
                 ee[:, i] = ea
             if kap:
-                ee *= np.sqrt(1.0 + (kap * np.minimum(Lt, 1e150)) ** 2)
+                ee *= np.sqrt(_level_var(kap, np.minimum(Lt, 1e150)))
             yy = sg * (mean + ee)
             past = yy >= Yo[alive, None]
             hit = past.any(1)
@@ -1604,6 +1604,12 @@ class LifeModel:
         c = np.cumsum(w)
         q = np.interp([0.05, 0.5, 0.95], c, z)
         return tuple(float(np.exp(v) * X) for v in q)
+
+
+def _level_var(kappa: float, L):
+    """The level-dependent HI noise's variance factor ``s^2 = 1 + kappa^2 L^2`` (record sd ``sigma s``; ``noise=
+    "level"``): the one place of that equation outside :meth:`_Batch._hstats`, which computes it in place."""
+    return 1.0 + (kappa * L) ** 2
 
 
 def _rate_draws(rate: float, var: float, n: int, rng: np.random.Generator):
@@ -1767,7 +1773,7 @@ class _UKF:
         pw = self.model.path == "power" or E is None
         kap = self.kap
         if kap:  # level-dependent noise: records scaled by s = sqrt(1 + kappa^2 L^2) at the current mean of z
-            sc = lambda X_, E_: 1.0 / math.sqrt(1.0 + (kap * float(self._lat(np.array([self.x[0]]), X_, E_)[0])) ** 2)  # noqa: E731
+            sc = lambda X_, E_: 1.0 / math.sqrt(_level_var(kap, float(self._lat(np.array([self.x[0]]), X_, E_)[0])))  # noqa: E731
         if self.prev is None:  # chain start: marginal variance sigma^2 / (1 - rho^2)
             Z = Xs[:, 1] + (self.c * np.exp(Xs[:, 0]) * X if pw else self.c * self._lat(Xs[:, 0], X, E))
             r2, meas = self.sig ** 2 / (1.0 - rho * rho), y
