@@ -1019,6 +1019,18 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         if spectra and spectra[-1].revolutions >= 2:
             orders[var] = merge_orders(catalog_orders(var), found)
 
+    if target == "Q_red" and "windup" in avail and "theta_m" in orders:
+        # a position error e(theta_m) inside a curved torsion law: Q = f(w - e) = f(w) - f'(w) e + f''(w) e^2 / 2 ...,
+        # and e^2 of harmonics at orders k_i, k_j holds k_i + k_j and |k_i - k_j| (with f = K w + k3 w^3, f'' = 6 k3 w:
+        # a stiffness ripple w sin((k_i +- k_j) theta_m)). Lines that weak are rarely above the spectrum's floor, so
+        # these orders are tried as candidates (every variant) and selection decides, as for the catalog's orders
+        ks = sorted({int(k) for k in orders["theta_m"] if float(k).is_integer()})
+        im = sorted(({a + b for a in ks for b in ks} | {abs(a - b) for a in ks for b in ks}) - {0} - set(ks))
+        if im:
+            orders["theta_m"] = merge_orders(orders["theta_m"], [float(k) for k in im])
+            statements.append(f"theta_m: orders {', '.join(map(str, im))} (sums and differences of orders "
+                              f"{', '.join(map(str, ks))}: a ripple through a curved torsion law) tried as well")
+
     # 3. candidates
     moving = np.abs(sf["omega_m"]) > 0.02 * scale
     ctx = LibraryContext(
