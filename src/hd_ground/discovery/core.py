@@ -11,7 +11,9 @@ plots and the report). Steps, for one measured target signal:
    speed variation, low-speed data, revolutions, temperature and load range);
    effects the data cannot identify are not proposed, and the reason is stated.
 3. Residual order spectra (against theta_m, theta_f; plain and times
-   sgn(omega_m)) give the orders to try besides the catalog's low orders.
+   sgn(omega_m)) give the orders to try besides the catalog's low orders; on
+   Q_red the sums and differences of the theta_m orders are tried as well (a
+   ripple through a curved torsion law, whose lines no spectrum threshold finds).
 4. Candidate groups (``library.py``) are selected by forward group selection
    with leave-one-block-out cross-validation over the fit blocks: a group is
    added only if it lowers the cross-validated error by ``min_gain`` of the
