@@ -365,13 +365,6 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
             best, prof = start, {}
         from scipy.optimize import minimize, minimize_scalar
 
-        if start is None and len(shapes) > 1:
-            # joint shapes: the grid's best point need not lie in the basin of the lowest CV error (the shapes
-            # trade off along curved valleys that run diagonally across grid cells, e.g. Stribeck's omega_s,
-            # delta and width), so a refinement confined to its cell can stop on the cell's edge, and the best
-            # grid point can sit in a secondary basin: refine from each local minimum of the grid
-            # (:func:`_grid_minima`) within the whole searched range, keep the lowest CV error
-            return _refine_from_grid_minima(shapes, grids, vv, lambda v: cv_obj(v, use), penalty, prof, minimize)
         # bounded refinement within one grid cell (in log for log shapes; for one shape a local minimum of the
         # grid brackets a local minimum of the CV error within one cell on either side)
         lo = [max(s.to_u(s.lo), s.to_u(b) - _cell(s)) for s, b in zip(shapes, best)]
@@ -393,6 +386,15 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
         if fu < f0:
             best = tuple(s.from_u(ui) for s, ui in zip(shapes, u))
             f0 = fu
+        if start is None and len(shapes) > 1:
+            # joint shapes: the grid's best point need not lie in the basin of the lowest CV error (the shapes
+            # trade off along curved valleys that run diagonally across grid cells, e.g. Stribeck's omega_s,
+            # delta and width), so the refinement confined to its cell can stop on the cell's edge, and the best
+            # grid point can sit in a secondary basin: refined also from each of the grid's lowest local minima
+            # (:func:`_grid_minima`) within the whole searched range; the lowest CV error of all wins
+            b2, f2 = _refine_from_grid_minima(shapes, grids, vv, lambda v: cv_obj(v, use), penalty, minimize)
+            if f2 < f0:
+                best, f0 = b2, f2
         return best, f0, prof
 
     best, fbest, prof = optimise(None, None)
@@ -480,11 +482,10 @@ def _grid_minima(vv: np.ndarray, penalty: float, k: int = MAX_GRID_STARTS) -> li
     return [tuple(int(j) for j in loc[i]) for i in order[:k]]
 
 
-def _refine_from_grid_minima(shapes, grids, vv, obj, penalty, prof, minimize):
+def _refine_from_grid_minima(shapes, grids, vv, obj, penalty, minimize):
     """Nelder-Mead on the CV error from each of the grid's lowest local minima (:func:`_grid_minima`), bounded by
     the searched range, with a first simplex of half a grid cell per shape (search coordinates); the lowest CV
-    error wins (the grid's best point when no refinement improves on it). Returns (shape values, CV SSE,
-    profile)."""
+    error wins (the grid's best point when no refinement improves on it). Returns (shape values, CV SSE)."""
     lo = [s.to_u(s.lo) for s in shapes]
     hi = [s.to_u(s.hi) for s in shapes]
 
@@ -507,7 +508,7 @@ def _refine_from_grid_minima(shapes, grids, vv, obj, penalty, prof, minimize):
         fu = f(u)
         if fu < fbest:
             best, fbest = tuple(s.from_u(ui) for s, ui in zip(shapes, u)), fu
-    return best, fbest, prof
+    return best, fbest
 
 
 # ---------------------------------------------------------------------------
