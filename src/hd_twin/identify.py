@@ -321,6 +321,9 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
     jackknife SD exceeds its own size (log shapes: SD of the log value > 1). Columns listed in
     ``positive`` must get a positive coefficient (physics): shapes where they do not are not chosen.
     The jackknife leaves out one of at most ``max_jk`` groups of neighbouring blocks at a time.
+    The grid's best point is refined within its cell; joint shapes (two or more) are refined also from each of
+    the grid's lowest local minima across the searched range (:func:`_refine_from_grid_minima`), and the lowest
+    CV error wins (shapes that trade off along a valley crossing cells diagonally; issue 10, seventeenth pass).
     """
     y = np.asarray(y, float)
     block = np.asarray(block)
