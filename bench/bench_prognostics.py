@@ -67,17 +67,29 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
         sg["threshold"] = _label(m)
+        if "noise_rule" in m.fit_info:  # noise="auto": the noise kept and the level fit's regularity
+            sg["noise"] = m.fit_info["noise"]
+            sg["noise_rule"] = m.fit_info["noise_rule"]
+            sg["noise_aic"] = m.fit_info["noise_aic"]
         if progress:
             print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" / {su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
                   f"{sp['coverage_p5_p95']:.2f} (ESS {m.fit_info['parameter_uncertainty'].get('ess', 0):.0f}, "
-                  f"threshold {m.threshold})"
+                  f"threshold {m.threshold}{_noise_txt(m)})"
                   f"  [{time.perf_counter() - t0:.1f} s]", flush=True)
         return sg, su, sp
 
     res = _run_folds(fold, [i for i, u in enumerate(units) if u.events.failure is not None])
     return [r[0] for r in res], [r[1] for r in res], [r[2] for r in res]
+
+
+def _noise_txt(m):
+    """', noise level (regular)' for a noise="auto" fit: the noise kept and whether the level fit was regular."""
+    r = m.fit_info.get("noise_rule")
+    if r is None:
+        return ""
+    return f", noise {m.fit_info['noise']}" + ("" if r["regular"] else f" (level fit irregular: {r['reason']})")
 
 
 def _label(m):
@@ -130,7 +142,7 @@ THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: max
 SPREAD = ["renewal+rate"]  # the future exposure's variability in the prognosis (--exposure-spread; LifeModel.fit)
 RATE = ["mean"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
 SCALE_PRIOR = ["uniform"]  # prior of the between-unit scales in the parameter draws (--scale-prior; LifeModel.fit)
-NOISE = ["constant"]  # HI noise model (--noise; LifeModel.fit: constant, level-dependent, or by AIC per fit)
+NOISE = ["auto"]  # HI noise model (--noise; LifeModel.fit: constant, level-dependent, or by AIC per fit)
 FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
 
@@ -302,10 +314,11 @@ def main(argv=None) -> int:
                     help="the future exposure's variability in the RUL: renewal+rate (default: the renewal spread and "
                          "the sampling uncertainty of the unit's mean rate), renewal (inverse-Gaussian passage time from "
                          "the unit's per-step increment variance) or none (single-rate extrapolation)")
-    ap.add_argument("--noise", default="constant", choices=("constant", "level", "auto"),
-                    help="HI noise model: one sigma (constant, the default), sigma sqrt(1 + kappa^2 L^2) growing with "
-                         "the latent level (level), or the lower AIC of both in every fit (auto; training units only; "
-                         "not the default: with 2 NASA cells per fold its fits are degenerate, src/hd_prognostic/README.md)")
+    ap.add_argument("--noise", default="auto", choices=("constant", "level", "auto"),
+                    help="HI noise model: one sigma (constant), sigma sqrt(1 + kappa^2 L^2) growing with the latent "
+                         "level (level), or auto (the default): the lower AIC of both in every fit (training units "
+                         "only), the level fit compared only when its optimum is regular (interior, identified: "
+                         "src/hd_prognostic/README.md, 'A regularity guard for the level noise')")
     ap.add_argument("--scale-prior", default="uniform", choices=("uniform", "log"),
                     help="prior of the between-unit scales (rate, offset, threshold scatter) in the parameter draws: "
                          "uniform on the sd (default) or 1/sd (log; src/hd_prognostic/README.md, 'Over-coverage of a "

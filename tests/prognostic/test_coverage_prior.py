@@ -58,3 +58,64 @@ def test_scale_prior_checked():
     units, _ = synth_units(4, seed=1, censor_frac=0.0)
     with pytest.raises(ValueError, match="scale_prior 'flat'"):
         LifeModel.fit(units, scale_prior="flat", n_draws=0)
+
+
+# ---- the level noise's regularity guard (lifemodel._noise_regularity), on likelihoods of known shape
+NAMES = ["mu", "log_sigma", "log_kappa", "atanh_rho"]
+
+
+def _quad(x0, sd, bound_rho=3.0, ridge=False):
+    """A negative log-likelihood: independent normal in each coordinate (or, ``ridge``, flat along log_sigma +
+    log_kappa = const: the noise all proportional to L), infinite past |atanh rho| >= bound_rho."""
+    x0, sd = np.asarray(x0, float), np.asarray(sd, float)
+
+    def nll(x):
+        if abs(x[3]) >= bound_rho:
+            return 1e30
+        r = (x - x0) / sd
+        if ridge:  # only the sum sigma * kappa is determined
+            r[1], r[2] = (x[1] + x[2] - x0[1] - x0[2]) / sd[1], 0.0
+        return 0.5 * float(r @ r)
+    return nll
+
+
+def test_noise_regularity_interior_fit_is_regular():
+    from hd_prognostic.lifemodel import _noise_regularity
+
+    x0 = [0.1, -5.0, 1.0, 0.3]
+    r = _noise_regularity(_quad(x0, [0.1, 0.05, 0.2, 0.05]), np.array(x0), NAMES)
+    assert r["regular"], r
+    assert r["wald"]["log_kappa"] == pytest.approx([1.0 - 1.96 * 0.2, 1.0 + 1.96 * 0.2], abs=2e-3)
+
+
+def test_noise_regularity_rejects_a_bound_a_ridge_and_a_wald_interval_at_the_box():
+    from hd_prognostic.lifemodel import _noise_regularity
+
+    # rho at its bound (0.995): the optimum's neighbour is outside the parameter space
+    x0 = [0.1, -5.0, 1.0, 2.999]
+    r = _noise_regularity(_quad(x0, [0.1, 0.05, 0.2, 0.05]), np.array(x0), NAMES)
+    assert not r["regular"] and "bound of atanh_rho" in r["reason"]
+    # sigma -> 0 with kappa -> infinity: a flat direction of the noise parameters
+    x0 = [0.1, -8.0, 4.0, 0.3]
+    r = _noise_regularity(_quad(x0, [0.1, 0.05, 0.2, 0.05], ridge=True), np.array(x0), NAMES)
+    assert not r["regular"] and "not positive definite" in r["reason"]
+    # an interior optimum whose likelihood does not bound kappa away from its numerical limit (log kappa < 5)
+    x0 = [0.1, -5.0, 4.5, 0.3]
+    r = _noise_regularity(_quad(x0, [0.1, 0.05, 0.4, 0.05]), np.array(x0), NAMES)
+    assert not r["regular"] and "log_kappa Wald" in r["reason"]
+    # the same optimum with a sharp likelihood is regular: the rule is about the information, not the value
+    assert _noise_regularity(_quad(x0, [0.1, 0.05, 0.1, 0.05]), np.array(x0), NAMES)["regular"]
+
+
+def test_noise_regularity_ignores_a_flat_direction_of_the_other_parameters():
+    """A threshold scatter at 0 (flat in its log: shared by the constant fit) is not the noise's flaw: the noise
+    parameters' profile information is what the rule reads."""
+    from hd_prognostic.lifemodel import _noise_regularity
+
+    x0 = np.array([0.1, -5.0, 1.0, 0.3])
+
+    def nll(x):
+        r = (x - x0) / np.array([1.0, 0.05, 0.2, 0.05])
+        r[0] = 0.0  # mu: flat
+        return 0.5 * float(r @ r)
+    assert _noise_regularity(nll, x0, NAMES)["regular"]
