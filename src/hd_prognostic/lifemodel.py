@@ -1914,8 +1914,9 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
                           threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at,
                           noise=m.fit_info.get("noise", "constant"), exposure_spread=exposure_spread)
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
-        if "noise_aic" in fits[best].fit_info:
-            m.fit_info["noise_aic"] = fits[best].fit_info["noise_aic"]
+        for k in ("noise_aic", "noise_rule"):
+            if k in fits[best].fit_info:
+                m.fit_info[k] = fits[best].fit_info[k]
         if "path_aic" in fits[best].fit_info:
             m.fit_info["path_aic"] = fits[best].fit_info["path_aic"]
     m.fit_info["exposure_candidates"] = {k: f.fit_info["log_likelihood"] for k, f in fits.items()}
