@@ -465,10 +465,13 @@ def _louo_subset(units, eols, args, name, level=None):
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
         sg["threshold"] = _label(m)
+        if "noise_rule" in m.fit_info:  # noise="auto": the noise kept and the level fit's regularity
+            sg.update(noise=m.fit_info["noise"], noise_rule=m.fit_info["noise_rule"], noise_aic=m.fit_info["noise_aic"])
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
-              f"{sp['coverage_p5_p95']:.2f} (threshold {sg['threshold']})  [{time.perf_counter() - t0:.1f} s]",
+              f"{sp['coverage_p5_p95']:.2f} (threshold {sg['threshold']}{_noise_txt(m)})  "
+              f"[{time.perf_counter() - t0:.1f} s]",
               flush=True)
         return sg, su, sp
 

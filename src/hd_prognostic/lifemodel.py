@@ -922,9 +922,9 @@ def _noise_regularity(nll, x: np.ndarray, names: list[str], h: float = 3e-3, z: 
     noise parameter lies outside the parameter space (``nll`` = 1e30: the optimum sits on a bound, e.g. rho at
     0.995); (2) the profile observed information of the noise parameters (sigma, kappa, rho: the Schur complement
     of the others' block of the finite-difference Hessian of ``nll``, over the directions that block identifies;
-    a boundary the constant fit shares, such as a threshold scatter at 0, is held fixed) is positive definite (a flat direction is an unidentified
-    combination, e.g. sigma -> 0 with kappa -> infinity when the noise is all proportional to L);
-    (3) the Wald 95 % interval of each noise parameter (rho, kappa: Laplace sd from the inverse Hessian) lies
+    a boundary the constant fit shares, such as a threshold scatter at 0, is held fixed) is positive definite
+    (a flat direction is an unidentified combination, e.g. sigma -> 0 with kappa -> infinity when the noise is
+    all proportional to L); (3) the Wald 95 % interval of each noise parameter (rho, kappa) lies
     inside its box (:data:`NOISE_BOX`): an interval reaching the box is a likelihood not bounded away from the
     boundary, where the normal approximation fails (sd from the inverse profile information). Returns
     {"regular", "reason", "wald": {name: [lo, hi]}, "hessian_eigen_min"} (the profile information's).
@@ -963,7 +963,8 @@ def _noise_regularity(nll, x: np.ndarray, names: list[str], h: float = 3e-3, z: 
             sj = sd[jn.index(j)]
             wald[k] = [float(x[j] - z * sj), float(x[j] + z * sj)]
             if wald[k][0] <= lo or wald[k][1] >= hi:
-                bad.append(f"{k} Wald 95 % interval [{wald[k][0]:.3g}, {wald[k][1]:.3g}] reaches its bound ({lo:g}, {hi:g})")
+                bad.append(f"{k} Wald 95 % interval [{wald[k][0]:.3g}, {wald[k][1]:.3g}] reaches its bound "
+                           f"({lo:g}, {hi:g})")
     return {"regular": not bad, "reason": "; ".join(bad) or "interior, positive-definite information",
             "wald": wald, "hessian_eigen_min": float(ev.min())}
 
