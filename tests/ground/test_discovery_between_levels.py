@@ -86,3 +86,20 @@ def test_a_real_short_stroke_periodic_torque_is_still_found():
     assert r.error_after["rmse"] < 0.6 * r.error_before["rmse"], (r.error_before, r.error_after)
     assert not any(t["step"] == "reject (between-block levels)" and t["candidate"].startswith("unknown[theta_f")
                    for t in r.cv_trace)
+
+
+def test_level_carrier_of_position_groups_and_none_for_the_target_itself():
+    # every position group is tested with its factor's level, except the i_q ripple: i_q = tau_m / k_t is the target,
+    # whose level per block would rescale the target (seen on harivin: the check then took the whole signal away and
+    # rejected its order-1 and order-2 ripples, held-out 0.026 -> 0.035 N*m)
+    from hd_ground.discovery.library import LibraryContext, build_candidates
+
+    ctx = LibraryContext(target="tau_m", available={"omega_m", "theta_m", "theta_f", "i_q", "tau_m"}, omega_scale=10.0,
+                         omega_low=1.0, sgn_eps=0.05, t_ref=25.0, orders={"theta_m": [1.0, 2.0]},
+                         excluded={"theta_f", "temperature", "load"}, short_stroke={"theta_f": (0.0, 0.3)})
+    pos = [c for c in build_candidates(ctx) if c.variable in ("theta_m", "theta_f")]
+    iq = [c for c in pos if any(f.get("var") == "i_q" for b in c.basis for f in b.get("factors", []))]
+    assert iq and all(c.level_carrier is None for c in iq)
+    rest = [c for c in pos if c not in iq]
+    assert rest and all(c.level_carrier is not None for c in rest)
+    assert {"op": "const"} in [c.level_carrier for c in rest] and any(c.level_carrier.get("op") == "sgn" for c in rest)

@@ -281,7 +281,9 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                     _periodic_name(ctx.target, var, k, variant), fam, var, float(k),
                     sin_cos_pair(var, float(k), times), form, _harm_params(pname, k),
                     requires=tuple({var} | ({times["var"]} if times and "var" in times else set())),
-                    level_carrier=dict(times) if times else {"op": "const"},
+                    # i_q is the target itself (tau_m / k_t): a level of it per block would rescale the target, no
+                    # nuisance that can be fitted, so the i_q variant is not tested (its ripple scales with the current)
+                    level_carrier=None if variant == "iq" else dict(times) if times else {"op": "const"},
                 ))
             if ctx.target == "Q_red" and "windup" in ctx.available and var == "theta_m" and float(k).is_integer():
                 # load-dependent amplitude of the same ripple (e.g. the KE's A_k(1 + a_T |T|/T_rated)): an
