@@ -17,7 +17,9 @@ plots and the report). Steps, for one measured target signal:
    added only if it lowers the cross-validated error by ``min_gain`` of the
    current error, does so in most folds and has identified coefficients (their
    leave-one-block-out jackknife Wald statistic reaches the 3-sigma chi^2
-   quantile); a backward pass drops groups that became redundant or lost
+   quantile); a group that is a function of a position (``Candidate.level_carrier``) must also gain with a
+   level of its factor per block free, over the blocks where the position moves (``within_block_sse``), not only
+   by levels between blocks; a backward pass drops groups that became redundant or lost
    identification. Alternatives of one family compete; one survives. A shaped group that is not identified
    in the final model closes its family and the selection is made again; the friction transition width is
    identified again given the selected groups, and when it moves beyond its SD, candidates and selection are
