@@ -62,22 +62,34 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
                           seed=seed, threshold=THRESHOLD[0], failure_level=level,
                           path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0],
-                          exposure_spread=SPREAD[0], noise=NOISE[0])
+                          exposure_spread=SPREAD[0], noise=NOISE[0], scale_prior=SCALE_PRIOR[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
         sg["threshold"] = _label(m)
+        if "noise_rule" in m.fit_info:  # noise="auto": the noise kept and the level fit's regularity
+            sg["noise"] = m.fit_info["noise"]
+            sg["noise_rule"] = m.fit_info["noise_rule"]
+            sg["noise_aic"] = m.fit_info["noise_aic"]
         if progress:
             print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" / {su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
                   f"{sp['coverage_p5_p95']:.2f} (ESS {m.fit_info['parameter_uncertainty'].get('ess', 0):.0f}, "
-                  f"threshold {m.threshold})"
+                  f"threshold {m.threshold}{_noise_txt(m)})"
                   f"  [{time.perf_counter() - t0:.1f} s]", flush=True)
         return sg, su, sp
 
     res = _run_folds(fold, [i for i, u in enumerate(units) if u.events.failure is not None])
     return [r[0] for r in res], [r[1] for r in res], [r[2] for r in res]
+
+
+def _noise_txt(m):
+    """', noise level (regular)' for a noise="auto" fit: the noise kept and whether the level fit was regular."""
+    r = m.fit_info.get("noise_rule")
+    if r is None:
+        return ""
+    return f", noise {m.fit_info['noise']}" + ("" if r["regular"] else f" (level fit irregular: {r['reason']})")
 
 
 def _label(m):
@@ -129,7 +141,8 @@ PATH = ["auto"]  # latent path family (--path; auto: power law or crack-growth s
 THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: maximum likelihood per fit)
 SPREAD = ["renewal+rate"]  # the future exposure's variability in the prognosis (--exposure-spread; LifeModel.fit)
 RATE = ["mean"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
-NOISE = ["constant"]  # HI noise model (--noise; LifeModel.fit: constant, level-dependent, or by AIC per fit)
+SCALE_PRIOR = ["uniform"]  # prior of the between-unit scales in the parameter draws (--scale-prior; LifeModel.fit)
+NOISE = ["auto"]  # HI noise model (--noise; LifeModel.fit: constant, level-dependent, or by AIC per fit)
 FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
 
@@ -301,10 +314,15 @@ def main(argv=None) -> int:
                     help="the future exposure's variability in the RUL: renewal+rate (default: the renewal spread and "
                          "the sampling uncertainty of the unit's mean rate), renewal (inverse-Gaussian passage time from "
                          "the unit's per-step increment variance) or none (single-rate extrapolation)")
-    ap.add_argument("--noise", default="constant", choices=("constant", "level", "auto"),
-                    help="HI noise model: one sigma (constant, the default), sigma sqrt(1 + kappa^2 L^2) growing with "
-                         "the latent level (level), or the lower AIC of both in every fit (auto; training units only; "
-                         "not the default: with 2 NASA cells per fold its fits are degenerate, src/hd_prognostic/README.md)")
+    ap.add_argument("--noise", default="auto", choices=("constant", "level", "auto"),
+                    help="HI noise model: one sigma (constant), sigma sqrt(1 + kappa^2 L^2) growing with the latent "
+                         "level (level), or auto (the default): the lower AIC of both in every fit (training units "
+                         "only), the level fit compared only when its optimum is regular (interior, identified: "
+                         "src/hd_prognostic/README.md, 'A regularity guard for the level noise')")
+    ap.add_argument("--scale-prior", default="uniform", choices=("uniform", "log"),
+                    help="prior of the between-unit scales (rate, offset, threshold scatter) in the parameter draws: "
+                         "uniform on the sd (default) or 1/sd (log; src/hd_prognostic/README.md, 'Over-coverage of a "
+                         "small fleet')")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),
                     help="Virkler only: override --failure-at (kept for older commands)")
     ap.add_argument("--workers", type=int, default=1)
@@ -319,6 +337,7 @@ def main(argv=None) -> int:
     RATE[0] = args.exposure_rate
     SPREAD[0] = args.exposure_spread
     NOISE[0] = args.noise
+    SCALE_PRIOR[0] = args.scale_prior
     JOBS[0] = args.jobs
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -371,7 +390,9 @@ def main(argv=None) -> int:
                     "threshold bound": float(np.mean(list(r["bound"].values()))) if r.get("bound") else None,
                     "reference": _row(r.get("reference", [])), "exposure": r.get("exposure"),
                     "reference_name": r.get("reference_name"), "seconds": r.get("seconds"),
-                    "threshold": _thr(r["life"])}
+                    "threshold": _thr(r["life"]),
+                    # the coverage's uncertainty over the dataset's units (metrics.coverage_interval)
+                    "coverage_interval": _cov_interval(r["life"])}
     (out / "bench_prognostics.json").write_text(json.dumps({"table": table, "results": results}, indent=1,
                                                            default=lambda o: float(o) if np.isscalar(o) else str(o)))
     print()
@@ -386,8 +407,23 @@ def main(argv=None) -> int:
               f"{f(t['plug-in'])} | "
               f"{f(t['reference'])} | {t['reference_name'] or '-'} | "
               f"{'-' if t['threshold bound'] is None else format(t['threshold bound'], '.2f')} |")
+    print("\nlife model P5-P95 coverage over units (95 % intervals; target 0.85-0.95): unit bootstrap / Wilson with one "
+          "trial per unit")
+    for n, t in table.items():
+        ci = t["coverage_interval"]
+        if ci.get("n_units"):
+            print(f"  {n}: {ci['coverage']:.3f} (SE {ci['se']:.3f}; {ci['n_units']} units) bootstrap [{ci['boot'][0]:.3f}, "
+                  f"{ci['boot'][1]:.3f}] {'consistent' if ci['consistent_boot'] else 'NOT consistent'} with the target; "
+                  f"Wilson [{ci['wilson'][0]:.3f}, {ci['wilson'][1]:.3f}]")
     print(f"\nwrote {out}/bench_prognostics.json; {time.perf_counter() - t_all:.0f} s in all")
     return 0
+
+
+def _cov_interval(rows):
+    """Coverage of the life model's rows with its unit-level uncertainty (bootstrap and binomial by unit)."""
+    from hd_prognostic.metrics import coverage_interval
+
+    return coverage_interval([r.get("coverage_p5_p95", float("nan")) for r in rows])
 
 
 def _thr(rows):
@@ -424,15 +460,18 @@ def _louo_subset(units, eols, args, name, level=None):
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed,
                           threshold="observable" if FAILURE_AT[0] == "crossing" else THRESHOLD[0],
                           failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0],
-                          exposure_spread=SPREAD[0], noise=NOISE[0])
+                          exposure_spread=SPREAD[0], noise=NOISE[0], scale_prior=SCALE_PRIOR[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
         sg["threshold"] = _label(m)
+        if "noise_rule" in m.fit_info:  # noise="auto": the noise kept and the level fit's regularity
+            sg.update(noise=m.fit_info["noise"], noise_rule=m.fit_info["noise_rule"], noise_aic=m.fit_info["noise_aic"])
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
-              f"{sp['coverage_p5_p95']:.2f} (threshold {sg['threshold']})  [{time.perf_counter() - t0:.1f} s]",
+              f"{sp['coverage_p5_p95']:.2f} (threshold {sg['threshold']}{_noise_txt(m)})  "
+              f"[{time.perf_counter() - t0:.1f} s]",
               flush=True)
         return sg, su, sp
 

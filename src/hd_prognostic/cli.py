@@ -295,6 +295,7 @@ def _fit_life(args) -> int:
                       "level": fi.get("level"),
                       "level_aic": fi.get("level_aic"),
                       "noise": fi.get("noise", "constant"), "noise_aic": fi.get("noise_aic"),
+                      "noise_rule": fi.get("noise_rule"),
                       "parameter_draws": len(m.draws),
                       "parameter_draws_ess": fi.get("parameter_uncertainty", {}).get("ess")}, indent=1, default=float))
     print(f"wrote {args.out}")
@@ -439,11 +440,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "records run through its failure, the record at the failure time being the first at or past "
                         "the level, else interval (the failure definition decides, not a score; printed as "
                         "failure_at_rule)")
-    p.add_argument("--noise", choices=("constant", "level", "auto"), default="constant",
-                   help="HI noise model: one sigma (constant, the default, the bench's), sigma sqrt(1 + kappa^2 L^2) "
-                        "growing with the latent level L (level), or auto: the level-dependent noise fitted for the "
-                        "path and threshold the constant noise chose, the lower AIC kept (opt-in: degenerate fits on "
-                        "2-cell NASA folds, src/hd_prognostic/README.md)")
+    p.add_argument("--noise", choices=("constant", "level", "auto"), default="auto",
+                   help="HI noise model: one sigma (constant), sigma sqrt(1 + kappa^2 L^2) growing with the latent "
+                        "level L (level), or auto (the default, the bench's): the level-dependent noise fitted for the "
+                        "path and threshold the constant noise chose, the lower AIC kept, compared only when its "
+                        "optimum is regular (interior, identified; printed as noise_rule; src/hd_prognostic/README.md)")
     p.add_argument("--exposure-spread", choices=("none", "renewal", "renewal+rate"), default="renewal+rate",
                    help="the future exposure's variability in the prognosis: renewal+rate (the default, the bench's: "
                         "the renewal spread of the unit's per-step increments and its mean rate's sampling "

@@ -78,6 +78,7 @@ THRESHOLDS = ("latent", "observable")  # where the failure threshold sits (LifeM
 #: the future exposure's variability in the prognosis (LifeModel.fit(exposure_spread=...)): none, the renewal
 #: spread of the unit's i.i.d. increments, or that plus the sampling uncertainty of its mean rate
 SPREADS = ("none", "renewal", "renewal+rate")
+SCALE_PRIORS = ("uniform", "log")  # prior of the between-unit scales in the parameter draws (LifeModel.fit)
 NOISES = ("constant", "level")  # HI noise model (LifeModel.fit(noise=...)): one sigma, or growing with the level
 MIN_INSPECTIONS = 4  # per quantity, fleet-wide, to fit its (alpha, beta, tau) map
 _LOG2PI = math.log(2 * math.pi)
@@ -907,6 +908,67 @@ def _hessian(f, x: np.ndarray, f0: float, h: float) -> np.ndarray:
     return H
 
 
+#: the box of the noise parameters in nll (|atanh rho| < 3: rho < 0.995; -9 < log kappa < 5)
+NOISE_BOX = {"atanh_rho": (-3.0, 3.0), "log_kappa": (-9.0, 5.0)}
+
+
+def _noise_regularity(nll, x: np.ndarray, names: list[str], h: float = 3e-3, z: float = 1.959963984540054) -> dict:
+    """Whether a level-noise fit's maximum is regular enough for AIC to compare it with the constant noise.
+
+    AIC (and the likelihood-ratio test it approximates) assumes the maximum-likelihood estimate is an interior
+    point of the parameter space, locally identified, and asymptotically normal there (Self & Liang 1987: on a
+    boundary the penalty 2k no longer holds). Checked at the optimum ``x`` (the optimiser's coordinates, where
+    ``atanh_rho`` and ``log_kappa`` are unscaled): (1) no neighbour at the finite-difference step ``h`` along a
+    noise parameter lies outside the parameter space (``nll`` = 1e30: the optimum sits on a bound, e.g. rho at
+    0.995); (2) the profile observed information of the noise parameters (sigma, kappa, rho: the Schur complement
+    of the others' block of the finite-difference Hessian of ``nll``, over the directions that block identifies;
+    a boundary the constant fit shares, such as a threshold scatter at 0, is held fixed) is positive definite
+    (a flat direction is an unidentified combination, e.g. sigma -> 0 with kappa -> infinity when the noise is
+    all proportional to L); (3) the Wald 95 % interval of each noise parameter (rho, kappa) lies
+    inside its box (:data:`NOISE_BOX`): an interval reaching the box is a likelihood not bounded away from the
+    boundary, where the normal approximation fails (sd from the inverse profile information). Returns
+    {"regular", "reason", "wald": {name: [lo, hi]}, "hessian_eigen_min"} (the profile information's).
+    The box of log kappa (kappa < 148: the noise 148 times its level-0 value at the median threshold) is a
+    numerical limit, not a physical one: (3) asks that the likelihood bound kappa away from it."""
+    f0 = float(nll(x))
+    d = len(x)
+    E = np.eye(d) * h
+    jn = [names.index(k) for k in ("log_sigma", "log_kappa", "atanh_rho") if k in names]
+    for i in jn:
+        if nll(x + E[i]) >= 1e29 or nll(x - E[i]) >= 1e29:
+            return {"regular": False, "reason": f"optimum within {h:g} of a bound of {names[i]}"}
+    H = _hessian(nll, x, f0, h)
+    H = 0.5 * (H + H.T)
+    if not np.all(np.isfinite(H)):
+        return {"regular": False, "reason": "observed information not finite"}
+    # the noise parameters' profile information: Schur complement of the other parameters' block over the
+    # directions that block identifies (positive curvature); its own flat or boundary directions (a threshold
+    # scatter at 0, shared with the constant fit) are held fixed: they are not the noise model's question
+    jr = [j for j in range(d) if j not in jn]
+    w, V = np.linalg.eigh(0.5 * (H[np.ix_(jr, jr)] + H[np.ix_(jr, jr)].T))
+    keep = w > 0
+    Hrr_inv = (V[:, keep] / w[keep]) @ V[:, keep].T
+    S = H[np.ix_(jn, jn)] - H[np.ix_(jn, jr)] @ Hrr_inv @ H[np.ix_(jr, jn)]
+    S = 0.5 * (S + S.T)
+    ev = np.linalg.eigvalsh(S)
+    if ev.min() <= 0:
+        return {"regular": False, "reason": f"profile information of the noise parameters not positive definite "
+                                            f"(smallest eigenvalue {ev.min():.3g}: a direction the records do not "
+                                            "identify)", "hessian_eigen_min": float(ev.min())}
+    sd = np.sqrt(np.diag(np.linalg.inv(S)))
+    wald, bad = {}, []
+    for k, (lo, hi) in NOISE_BOX.items():
+        if k in names:
+            j = names.index(k)
+            sj = sd[jn.index(j)]
+            wald[k] = [float(x[j] - z * sj), float(x[j] + z * sj)]
+            if wald[k][0] <= lo or wald[k][1] >= hi:
+                bad.append(f"{k} Wald 95 % interval [{wald[k][0]:.3g}, {wald[k][1]:.3g}] reaches its bound "
+                           f"({lo:g}, {hi:g})")
+    return {"regular": not bad, "reason": "; ".join(bad) or "interior, positive-definite information",
+            "wald": wald, "hessian_eigen_min": float(ev.min())}
+
+
 def _mvt_logpdf(X: np.ndarray, m: np.ndarray, L: np.ndarray, dof: float) -> np.ndarray:
     """Log density of the multivariate Student-t with location m, scale L L^T, ``dof`` at the rows of X."""
     d = len(m)
@@ -1085,7 +1147,7 @@ class LifeModel:
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
             seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
             path: str = "power", failure_at: str = "interval", exposure_rate: str = "mean",
-            exposure_spread: str = "renewal", noise: str = "constant") -> "LifeModel":
+            exposure_spread: str = "renewal", noise: str = "constant", scale_prior: str = "uniform") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -1129,6 +1191,8 @@ class LifeModel:
             raise ValueError(f"life-model fit: exposure_rate {exposure_rate!r} is not one of median, mean")
         if exposure_spread not in SPREADS:
             raise ValueError(f"life-model fit: exposure_spread {exposure_spread!r} is not one of {', '.join(SPREADS)}")
+        if scale_prior not in SCALE_PRIORS:
+            raise ValueError(f"life-model fit: scale_prior {scale_prior!r} is not one of {', '.join(SCALE_PRIORS)}")
         if noise not in NOISES + ("auto",):
             raise ValueError(f"life-model fit: noise {noise!r} is not one of {', '.join(NOISES)}, auto")
         rule = None
@@ -1265,7 +1329,7 @@ class LifeModel:
 
             windows = np.full((len(units), 2), np.nan)
 
-            def nll(xs):
+            def nll(xs, fresh=False):  # fresh: grids from the population law, not the last call's windows
                 th, ins = unpack(xs)
                 if not (-6 < th["log_b"] < 2.5 and -9 < th["log_s"] < 3 and abs(th["atanh_rho"]) < 3.0):
                     return 1e30
@@ -1277,7 +1341,7 @@ class LifeModel:
                     return 1e30
                 if "log_kappa" in th and not -9 < th["log_kappa"] < 5:
                     return 1e30
-                z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=windows)
+                z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=None if fresh else windows)
                 with np.errstate(divide="ignore"):
                     lm = _lse(f) + np.log(dz)
                 if not np.all(np.isfinite(lm)):
@@ -1321,9 +1385,16 @@ class LifeModel:
             base = allfits[(f0, k0, "constant")]
             lev = ml(k0, f0, fix_level=not base.get("free_level"), nz="level")
             lev["free_level"] = base.get("free_level", False)
-            allfits[(f0, k0, "level")] = lev
-            if level_aic is not None:
-                level_aic[(f0, "level")] = level_aic[(f0, "constant")]
+            # AIC compares regular maxima only: the level fit joins the comparison when its noise parameters'
+            # optimum is an interior, locally identified one (_noise_regularity); otherwise the constant noise is
+            # kept and the reason recorded (fit_info["noise_rule"])
+            # (fresh grids: the windowed quadrature depends on the previous call, noise a Hessian must not see)
+            noise_rule = _noise_regularity(lambda xs: lev["nll"](xs, True), lev["r2"].x, lev["names"])
+            noise_rule["aic"] = float(lev["aic"])
+            if noise_rule["regular"]:
+                allfits[(f0, k0, "level")] = lev
+                if level_aic is not None:
+                    level_aic[(f0, "level")] = level_aic[(f0, "constant")]
         for (f_, k, nz), v in allfits.items():
             if progress:
                 print(f"  path {f_}, threshold {k}, noise {nz}: log-likelihood {-v['r2'].fun:.2f}, AIC {v['aic']:.2f}",
@@ -1342,9 +1413,18 @@ class LifeModel:
                              "rho" + (" and on the noise's level factor kappa" if "log_kappa" in th else "")
                              + "; flat on the rest")
 
+                # the between-unit scales' prior (s, s_a, threshold scatter): uniform on the sd (Gelman 2006), or
+                # 1/sd ("log": flat in log sd, the right-Haar prior of a location-scale family, whose posterior
+                # predictive interval for a new member of a normal sample is the exact frequentist prediction
+                # interval; the uniform one widens it to t with n - 2 dof: 7 units' P5-P95 covers 93 %, not 90 %)
+                jb = 0.0 if scale_prior == "log" else 1.0
+                prior_txt = (prior_txt.replace("uniform on every standard deviation (s, s_a, sigma, threshold scatter, "
+                                               "tau)", "1/sd on the between-unit scales (s, s_a, threshold scatter), "
+                                               "uniform on sigma and tau") if jb == 0.0 else prior_txt)
+
                 def log_prior(xs):  # uniform on every standard deviation and on rho, flat on the rest
                     t, i_ = unpack(xs)
-                    return (t["log_s"] + t["log_sa"] + t["log_sigma"] + t[thr_key] + t.get("log_kappa", 0.0)
+                    return (jb * (t["log_s"] + t["log_sa"] + t[thr_key]) + t["log_sigma"] + t.get("log_kappa", 0.0)
                             + sum(v["log_tau"] for v in i_.values())
                             + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
             else:
@@ -1386,8 +1466,9 @@ class LifeModel:
         if len(fams) > 1:
             info["path_aic"] = {f_: float(min(v["aic"] for (g_, _, _), v in allfits.items() if g_ == f_)) for f_ in fams}
         if len(noises) > 1:  # the noise model's AIC (best path and threshold of each; level: the constant's choice)
-            info["noise_aic"] = {nz: float(min(v["aic"] for (_, _, n_), v in allfits.items() if n_ == nz))
-                                 for nz in noises}
+            info["noise_aic"] = {"constant": float(min(v["aic"] for (_, _, n_), v in allfits.items()
+                                                       if n_ == "constant")), "level": noise_rule["aic"]}
+            info["noise_rule"] = noise_rule
         if len(fits) > 1:
             info["threshold_candidates"] = {k: float(-v["r2"].fun) for k, v in fits.items()}
             info["threshold_aic"] = {k: float(v["aic"]) for k, v in fits.items()}
@@ -1406,6 +1487,8 @@ class LifeModel:
         info["exposure_spread"] = exposure_spread
         # the HI noise model: "constant" (one sigma) or "level" (sigma sqrt(1 + kappa^2 L^2), theta["log_kappa"])
         info["noise"] = nz_best
+        if scale_prior != "uniform":
+            info["scale_prior"] = scale_prior
         if level_aic is not None:
             info["level_aic"] = level_aic[(fam, nz_best)]
             info["level"] = "fitted" if F.get("free_level") else "fixed"
@@ -1832,8 +1915,9 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
                           threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at,
                           noise=m.fit_info.get("noise", "constant"), exposure_spread=exposure_spread)
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
-        if "noise_aic" in fits[best].fit_info:
-            m.fit_info["noise_aic"] = fits[best].fit_info["noise_aic"]
+        for k in ("noise_aic", "noise_rule"):
+            if k in fits[best].fit_info:
+                m.fit_info[k] = fits[best].fit_info[k]
         if "path_aic" in fits[best].fit_info:
             m.fit_info["path_aic"] = fits[best].fit_info["path_aic"]
     m.fit_info["exposure_candidates"] = {k: f.fit_info["log_likelihood"] for k, f in fits.items()}

@@ -272,6 +272,41 @@ def coverage(lo, hi, r_true) -> float:
     return float(np.mean((r >= lo) & (r <= hi)))
 
 
+def coverage_interval(per_unit, level: float = 0.95, n_boot: int = 4000, seed: int = 0,
+                      target: tuple[float, float] = (0.85, 0.95)) -> dict:
+    """Uncertainty of a fleet's P5-P95 coverage (the mean of its units' coverages) from its units alone.
+
+    A unit's predictions are one trajectory (strongly correlated), so the unit is the sampling unit:
+    ``boot``: percentile interval of the mean over ``n_boot`` unit-level bootstrap resamples (seeded; it
+    sees only the between-unit variation present, and is degenerate, e.g. [1, 1], when every unit has the
+    same coverage; with 6-8 units it is known to be somewhat narrow); ``wilson``: the Wilson score interval
+    of the mean with one effective Bernoulli trial per unit (binomial by unit, the conservative bound when
+    the within-unit correlation is near 1). ``se``: sd / sqrt(n) of the unit coverages. ``consistent_*``:
+    whether that interval meets the target band ``target``. NaN unit values are dropped."""
+    c = _arr(per_unit)
+    c = c[np.isfinite(c)]
+    n = len(c)
+    out = {"n_units": n, "coverage": float(np.mean(c)) if n else float("nan")}
+    if n == 0:
+        return out
+    a = 0.5 * (1.0 - level)
+    rng = np.random.default_rng(seed)
+    means = c[rng.integers(0, n, (n_boot, n))].mean(1)
+    lo, hi = (float(v) for v in np.quantile(means, [a, 1.0 - a]))
+    from statistics import NormalDist
+
+    zq = NormalDist().inv_cdf(1.0 - a)
+    p = out["coverage"]
+    den = 1.0 + zq * zq / n
+    mid = (p + zq * zq / (2 * n)) / den
+    half = zq * np.sqrt(p * (1 - p) / n + zq * zq / (4 * n * n)) / den
+    out.update({"se": float(np.std(c, ddof=1) / np.sqrt(n)) if n > 1 else float("nan"), "level": level,
+                "boot": [lo, hi], "wilson": [float(mid - half), float(mid + half)],
+                "consistent_boot": bool(lo <= target[1] and hi >= target[0]),
+                "consistent_wilson": bool(mid - half <= target[1] and mid + half >= target[0])})
+    return out
+
+
 def pit(samples, r_true, weights=None) -> float:
     """Probability integral transform: predicted CDF at the true RUL (uniform when calibrated).
 

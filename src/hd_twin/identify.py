@@ -321,6 +321,9 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
     jackknife SD exceeds its own size (log shapes: SD of the log value > 1). Columns listed in
     ``positive`` must get a positive coefficient (physics): shapes where they do not are not chosen.
     The jackknife leaves out one of at most ``max_jk`` groups of neighbouring blocks at a time.
+    The grid's best point is refined within its cell; joint shapes (two or more) are refined also from each of
+    the grid's lowest local minima across the searched range (:func:`_refine_from_grid_minima`), and the lowest
+    CV error wins (shapes that trade off along a valley crossing cells diagonally; issue 10, seventeenth pass).
     """
     y = np.asarray(y, float)
     block = np.asarray(block)
@@ -363,15 +366,16 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
                 prof[s.name] = np.min(vv, axis=ax) if ax else vv
         else:
             best, prof = start, {}
-        # bounded refinement within one grid cell (in log for log shapes)
+        from scipy.optimize import minimize, minimize_scalar
+
+        # bounded refinement within one grid cell (in log for log shapes; for one shape a local minimum of the
+        # grid brackets a local minimum of the CV error within one cell on either side)
         lo = [max(s.to_u(s.lo), s.to_u(b) - _cell(s)) for s, b in zip(shapes, best)]
         hi = [min(s.to_u(s.hi), s.to_u(b) + _cell(s)) for s, b in zip(shapes, best)]
 
         def f(u):
             u = np.clip(np.atleast_1d(u), lo, hi)
             return cv_obj(tuple(s.from_u(ui) for s, ui in zip(shapes, u)), use)
-
-        from scipy.optimize import minimize, minimize_scalar
 
         if len(shapes) == 1:
             r = minimize_scalar(f, bounds=(lo[0], hi[0]), method="bounded", options={"xatol": 1e-3})
@@ -385,6 +389,15 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
         if fu < f0:
             best = tuple(s.from_u(ui) for s, ui in zip(shapes, u))
             f0 = fu
+        if start is None and len(shapes) > 1:
+            # joint shapes: the grid's best point need not lie in the basin of the lowest CV error (the shapes
+            # trade off along curved valleys that run diagonally across grid cells, e.g. Stribeck's omega_s,
+            # delta and width), so the refinement confined to its cell can stop on the cell's edge, and the best
+            # grid point can sit in a secondary basin: refined also from each of the grid's lowest local minima
+            # (:func:`_grid_minima`) within the whole searched range; the lowest CV error of all wins
+            b2, f2 = _refine_from_grid_minima(shapes, grids, vv, lambda v: cv_obj(v, use), penalty, minimize)
+            if f2 < f0:
+                best, f0 = b2, f2
         return best, f0, prof
 
     best, fbest, prof = optimise(None, None)
@@ -455,6 +468,50 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
 
 def _cell(s: Shape) -> float:
     return (s.to_u(s.hi) - s.to_u(s.lo)) / max(s.n_grid - 1, 1)
+
+
+#: Local minima of the shape grid refined by :func:`fit_separable` for joint shapes (the lowest CV errors first).
+MAX_GRID_STARTS = 3
+
+
+def _grid_minima(vv: np.ndarray, penalty: float, k: int = MAX_GRID_STARTS) -> list[tuple]:
+    """Indices of the ``k`` lowest local minima of the CV error on the shape grid ``vv`` (a point no higher than
+    its neighbours, diagonals included; points at the penalty, i.e. without the required sign, excluded)."""
+    from scipy.ndimage import minimum_filter
+
+    v = np.where(np.isfinite(vv) & (vv < penalty), vv, np.inf)
+    loc = np.argwhere((v <= minimum_filter(v, size=3, mode="nearest")) & np.isfinite(v))
+    order = np.argsort([v[tuple(i)] for i in loc], kind="stable")
+    return [tuple(int(j) for j in loc[i]) for i in order[:k]]
+
+
+def _refine_from_grid_minima(shapes, grids, vv, obj, penalty, minimize):
+    """Nelder-Mead on the CV error from each of the grid's lowest local minima (:func:`_grid_minima`), bounded by
+    the searched range, with a first simplex of half a grid cell per shape (search coordinates); the lowest CV
+    error wins (the grid's best point when no refinement improves on it). Returns (shape values, CV SSE)."""
+    lo = [s.to_u(s.lo) for s in shapes]
+    hi = [s.to_u(s.hi) for s in shapes]
+
+    def f(u):
+        u = np.clip(np.asarray(u, float), lo, hi)
+        return obj(tuple(s.from_u(ui) for s, ui in zip(shapes, u)))
+
+    k0 = np.unravel_index(int(np.argmin(vv)), vv.shape)
+    best = tuple(float(g[i]) for g, i in zip(grids, k0))
+    fbest = obj(best)
+    for ijk in _grid_minima(vv, penalty):
+        u0 = np.array([s.to_u(g[i]) for s, g, i in zip(shapes, grids, ijk)], float)
+        step = np.array([0.5 * _cell(s) for s in shapes])
+        simplex = np.vstack([u0] + [np.clip(u0 + np.eye(len(shapes))[i] * step[i] * (1 if u0[i] + step[i] <= hi[i]
+                                                                                        else -1), lo, hi)
+                                    for i in range(len(shapes))])
+        r = minimize(f, u0, method="Nelder-Mead", bounds=list(zip(lo, hi)),
+                     options={"xatol": 1e-3, "fatol": 1e-9, "maxfev": 100 * len(shapes), "initial_simplex": simplex})
+        u = np.clip(r.x, lo, hi)
+        fu = f(u)
+        if fu < fbest:
+            best, fbest = tuple(s.from_u(ui) for s, ui in zip(shapes, u)), fu
+    return best, fbest
 
 
 # ---------------------------------------------------------------------------

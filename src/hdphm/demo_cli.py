@@ -83,10 +83,12 @@ def _fit_life(fleet: Path, train_ids: list[str], truth: dict, out_json: Path, ar
         units = [unit_history(a, "HF_MTW_IF", e) for a in acts]
         attach_events(units, ev, str(ev_path))
         cands[e] = units
-    # the future exposure's spread as `hdphm prognostic fit` has it by default (renewal + the mean rate's uncertainty)
-    m = fit_best(cands, feature="HF_MTW_IF", exposure_spread="renewal+rate")
+    # the future exposure's spread and the HI noise as `hdphm prognostic fit` has them by default (renewal + the mean
+    # rate's uncertainty; the level-dependent noise kept by AIC only at a regular optimum)
+    m = fit_best(cands, feature="HF_MTW_IF", exposure_spread="renewal+rate", noise="auto")
     m.to_json(out_json)
-    _say(f"    life model: clock '{m.exposure}' (maximum likelihood), {m.fit_info['n_failures']} failures")
+    _say(f"    life model: clock '{m.exposure}' (maximum likelihood), {m.fit_info['n_failures']} failures, "
+         f"HI noise {m.fit_info.get('noise', 'constant')}")
     return m
 
 

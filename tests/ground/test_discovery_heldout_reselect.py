@@ -16,7 +16,7 @@ def _groups():
 def _run(trace, monkeypatch, new_sel=(0, 1, 2)):
     calls = []
 
-    def fake_select(gram, base_idx, groups, opt, reshape=None, confirm=None, closed=()):
+    def fake_select(gram, base_idx, groups, opt, reshape=None, confirm=None, closed=(), carrier=None):
         calls.append(set(closed))
         return list(new_sel), [{"step": "add", "candidate": "x"}]
 

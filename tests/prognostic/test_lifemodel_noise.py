@@ -71,6 +71,9 @@ def test_level_noise_recovered_and_chosen_by_aic():
     units = _level_units(6, seed=6, kappa=2.0)
     m = LifeModel.fit(units, n_draws=0, noise="auto")
     assert m.fit_info["noise"] == "level"
+    assert m.fit_info["noise_rule"]["regular"]  # interior, identified: the guard lets AIC compare it
+    lo, hi = m.fit_info["noise_rule"]["wald"]["log_kappa"]
+    assert lo < math.log(2.0) < hi
     aic = m.fit_info["noise_aic"]
     assert aic["constant"] - aic["level"] > 20
     assert math.exp(m.theta["log_kappa"]) == pytest.approx(2.0, rel=0.3)

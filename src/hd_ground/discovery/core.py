@@ -19,7 +19,9 @@ plots and the report). Steps, for one measured target signal:
    added only if it lowers the cross-validated error by ``min_gain`` of the
    current error, does so in most folds and has identified coefficients (their
    leave-one-block-out jackknife Wald statistic reaches the 3-sigma chi^2
-   quantile); a backward pass drops groups that became redundant or lost
+   quantile); a group that is a function of a position (``Candidate.level_carrier``) must also gain with a
+   level of its factor per block free, over the blocks where the position moves (``within_block_sse``), not only
+   by levels between blocks; a backward pass drops groups that became redundant or lost
    identification. Alternatives of one family compete; one survives. A shaped group that is not identified
    in the final model closes its family and the selection is made again; the friction transition width is
    identified again given the selected groups, and when it moves beyond its SD, candidates and selection are
@@ -38,7 +40,7 @@ import numpy as np
 from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_state, vp_shape
 from hd_twin.terms import basis_matrix, evaluate_terms
 
-from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, with_smoothed_twist
+from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, angle_resolution, with_smoothed_twist
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
                       state_var)
 from .loopshape import refine_loop_shape, twist_state_of
@@ -465,8 +467,60 @@ def _paired_t(sse_a: np.ndarray, sse_b: np.ndarray) -> float:
     return float(d.sum() / se)
 
 
+def within_block_sse(gram: _BlockGram, cur_idx: list[int], trial_idx: list[int], carrier: np.ndarray,
+                     still: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-block leave-one-block-out SSE of the current model and of the trial model on the gram's data with a level
+    of ``carrier`` per block projected out of the target and of every column (Frisch-Waugh: a free level of the
+    carrier in each block, the left-out block's included, as a nuisance parameter).
+
+    A function f(x) of a position x times a factor g is, where x stands still, c g: a level of g. Such levels are
+    what an unmodelled slow state leaves in the residual (a hysteresis state starting from 0 in every mission, a
+    drift), and f(x) takes them whenever the blocks sit at different x (a parked or dithering mission, a slow drift
+    of x with the state). With the levels free in both models the trial model gains only by what x's motion *within*
+    the blocks explains, the part no level can imitate. ``carrier``: per fit row (the gram's rows, in order).
+
+    ``still`` (per fit row, constant within a block): blocks where x has not been seen to move (it spans at most one
+    quantisation step of its encoder; the count toggling there is measurement, driven by the load through the
+    twist, not a motion along x). There f(x) g is f(x0) g, a level: the group's own columns are taken as exactly
+    that (zero once the level is projected out). Returns (current, trial, informative), the last a mask of the
+    blocks where x moves (the only ones whose SSE change says anything about a function of x)."""
+    cols = list(dict.fromkeys(list(cur_idx) + list(trial_idx)))
+    own = [i for i, c in enumerate(cols) if c not in cur_idx]
+    X = gram._Xs[:, cols].copy()
+    y = np.asarray(gram._y, float).copy()
+    blocks = np.empty(len(y), int)
+    info = np.ones(len(gram._masks), bool)
+    for i, m in enumerate(gram._masks):
+        blocks[m] = i
+        c = carrier[m]
+        cc = float(c @ c)
+        if cc > 0:
+            X[m] -= np.outer(c, (c @ X[m]) / cc)
+            y[m] -= c * (float(c @ y[m]) / cc)
+        if still is not None and bool(np.all(still[m])):
+            info[i] = False
+            X[np.ix_(np.flatnonzero(m), own)] = 0.0
+    g2 = _BlockGram(X, y, blocks)
+    pos = {c: i for i, c in enumerate(cols)}
+    return g2.cv_sse([pos[c] for c in cur_idx]), g2.cv_sse([pos[c] for c in trial_idx]), info
+
+
+def still_blocks(x: np.ndarray, block: np.ndarray, segment: np.ndarray) -> np.ndarray:
+    """Rows of the blocks in which the angle ``x`` has not been seen to move: it spans at most one quantisation step
+    of its encoder (``data.angle_resolution``; 0 for an angle that is not visibly quantised, then only an angle
+    exactly constant over the block is still). A count toggling there is measurement (the load moves the angle by
+    a count through the twist), not a motion along x."""
+    q = angle_resolution(x, segment)
+    out = np.zeros(len(x), bool)
+    for b in np.unique(block):
+        m = block == b
+        if np.ptp(x[m]) <= q * (1.0 + 1e-6):
+            out[m] = True
+    return out
+
+
 def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Candidate, list[int]]], opt: Options,
-                  reshape=None, confirm=None, closed=()):
+                  reshape=None, confirm=None, closed=(), carrier=None):
     """Forward group selection + backward pruning by leave-one-block-out CV. Returns (selected, trace).
 
     Candidates with nonlinear shapes: before each forward step ``reshape(gi, cur_idx)`` identifies the
@@ -474,6 +528,11 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
     False when no shape is admissible. A group is admitted only if ``confirm(gi, cur_idx)`` (the
     shape's block-jackknife identification) returns (True, note). Families in ``closed`` are not
     considered; a refinement (``Candidate.after``) competes only once its family is selected.
+
+    ``carrier(gi)`` (the group's ``Candidate.level_carrier`` on the fit rows, or None): a group with a carrier, a
+    function of a position, must also pass the selection's rules (gain, fold majority, SE) with a level of its
+    carrier per block free in both models (:func:`within_block_sse`); one that gains only by levels between blocks
+    is rejected at this step ("reject (between-block levels)") and competes again once the model has changed.
     """
     cur_idx = list(base_idx)
     cur = gram.cv_sse(cur_idx)
@@ -524,6 +583,26 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             trace.append(rec)
             fams_skip.add(cand.family)
             continue
+        car = carrier(gi) if carrier is not None else None
+        if car is not None:
+            # a function of a position, judged where the position moves, with a level per block free: its gain must
+            # still reach min_gain and exceed one paired standard error (the consistency across blocks was judged on
+            # the pooled CV above; the fold count, a discrete statistic, is not asked twice)
+            cw, ew, info = within_block_sse(gram, cur_idx, _model(base_idx, groups, selected + [gi]), *car)
+            if info.any():
+                gw, fw, tw, why = _identified_against(cw[info], ew[info], opt)
+                why = [w for w in why if not w.startswith("better in")]
+            else:
+                gw, fw, tw, why = 0.0, 0.0, float("-inf"), ["its position does not move within any block"]
+            rec.update(within_gain=float(gw), within_folds=fw, within_t=tw, within_blocks=int(info.sum()))
+            if why:
+                # its CV gain is a level per block (blocks at different positions, the position still or drifting
+                # slowly within them), not a function of the position: not admitted at this step
+                rec["step"] = "reject (between-block levels)"
+                rec["note"] = "; ".join(why)
+                trace.append(rec)
+                fams_skip.add(cand.family)
+                continue
         tcols = _tcols(groups, gi)
         wald = gram.jackknife_wald(_model(base_idx, groups, selected + [gi]), tcols)
         rec["wald"] = wald
@@ -1118,6 +1197,24 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         confirmed[gi] = (key, (ok_, "; ".join(n for n in res.notes if n.split(":")[0] not in cand.nuisance)))
         return confirmed[gi][1]
 
+    carriers: dict[str, np.ndarray] = {}
+
+    stills: dict[str, np.ndarray] = {}
+
+    def carrier(gi):
+        """The group's level carrier (a position function's factor) on the fit rows and the fit rows of blocks where
+        its position does not move beyond one quantisation step (:func:`still_blocks`); None if not tested."""
+        cand = groups[gi][0]
+        spec = cand.level_carrier
+        if spec is None or cand.variable not in sf:
+            return None
+        key = repr(sorted(spec.items()))
+        if key not in carriers:
+            carriers[key] = basis_matrix([spec], sig)[fit][:, 0]
+        if cand.variable not in stills:
+            stills[cand.variable] = still_blocks(sf[cand.variable], ds.block[fit], ds.segment[fit])
+        return carriers[key], stills[cand.variable]
+
     # 4. final shapes of the selected shaped groups, each given all the others (CV profile + jackknife);
     # a group whose shape is no longer identified in the final model leaves it, and the selection is made
     # again without its family: a group that is not identified must not have steered which others entered
@@ -1125,7 +1222,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     trace = []
     loop_done = False
     for _pass in range(4):
-        sel, tr = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm, closed=closed)
+        sel, tr = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm, closed=closed,
+                                carrier=carrier)
         trace += tr
         if not loop_done:
             # 4a. the selected hysteresis loop's shape (loopshape: Bouc-Wen family, Dahl inside); when it
@@ -1258,7 +1356,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                           "not an effect")
         sel = [g for g in sel if g != gi]
         sel = _reselect_without_heldout_drop(gram, base_idx, groups, opt, sel, gi, trace, closed, held_closed,
-                                             reshape, confirm, statements)
+                                             reshape, confirm, statements, carrier=carrier)
     terms = [terms[i] for i in order]
     declared_after = list(declared)
     for e in effects:
@@ -1306,7 +1404,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
 
 
 def _reselect_without_heldout_drop(gram, base_idx, groups, opt, sel, gi, trace, closed, held_closed, reshape, confirm,
-                                   statements) -> list[int]:
+                                   statements, carrier=None) -> list[int]:
     """After the held-out arbiter dropped group ``gi``: when ``gi``'s entry had displaced selected groups (a drop
     from the model after ``gi`` was added, in the selection trace), the selection is made again on the fit blocks
     without ``gi``'s family, as after a group whose shape is not identified: a group that does not generalise must
@@ -1323,7 +1421,7 @@ def _reselect_without_heldout_drop(gram, base_idx, groups, opt, sel, gi, trace, 
         return sel
     held_closed.add(cand.family)
     sel2, tr2 = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm,
-                              closed=set(closed) | held_closed)
+                              closed=set(closed) | held_closed, carrier=carrier)
     trace.append({"step": "reselect (held-out drop)", "closed": sorted(held_closed),
                   "displaced": [r["candidate"] for r in displaced]})
     trace += tr2

@@ -60,6 +60,10 @@ class Candidate:
     nuisance: tuple[str, ...] = ()  # shapes re-identified with the group whose identification does not decide
     replaces: tuple[str, ...] = ()  # baseline parameters whose columns the group replaces (e.g. "T_C")
     after: str | None = None  # a refinement: competes only once this family is selected (e.g. the next order)
+    # a function of a position (an angle) times this factor ({"op": "const"} for none): the group must also lower
+    # the CV error with a level of the factor per block as a nuisance (core.within_block_sse), i.e. by the angle's
+    # motion within blocks, not by levels between blocks where the angle stands still (None: not tested)
+    level_carrier: dict | None = None
 
     def set_shape(self, shape: dict, sd: dict | None = None) -> None:
         """Fix the shape parameters (and record their SDs): rebuilds ``basis``."""
@@ -277,6 +281,9 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                     _periodic_name(ctx.target, var, k, variant), fam, var, float(k),
                     sin_cos_pair(var, float(k), times), form, _harm_params(pname, k),
                     requires=tuple({var} | ({times["var"]} if times and "var" in times else set())),
+                    # i_q is the target itself (tau_m / k_t): a level of it per block would rescale the target, no
+                    # nuisance that can be fitted, so the i_q variant is not tested (its ripple scales with the current)
+                    level_carrier=None if variant == "iq" else dict(times) if times else {"op": "const"},
                 ))
             if ctx.target == "Q_red" and "windup" in ctx.available and var == "theta_m" and float(k).is_integer():
                 # load-dependent amplitude of the same ripple (e.g. the KE's A_k(1 + a_T |T|/T_rated)): an
@@ -286,6 +293,7 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                     sin_cos_pair(var, float(k), {"op": "abs", "var": "windup"}),
                     f"K a_{ks} |w| sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (load-dependent amplitude)",
                     _harm_params("K_a", k), requires=(var, "windup"),
+                    level_carrier={"op": "abs", "var": "windup"},
                 ))
                 # the same ripple through a hardening torsion law's local stiffness: a position error e(theta)
                 # inside the spring gives Q = f(w - e) ~ f(w) - f'(w) e, and with f = K w + k3 w^3 the
@@ -297,6 +305,7 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                     f"K b_{ks} w^2 sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (the ripple through the "
                     "torsion law's local stiffness)",
                     _harm_params("K_b", k), requires=(var, "windup"),
+                    level_carrier={"op": "pow", "var": "windup", "p": 2.0},
                 ))
     return out
 
@@ -361,6 +370,7 @@ def short_stroke_candidates(ctx: LibraryContext) -> list[Candidate]:
                 lambda c, h=half: {"p0": float(c[0]), "p1": float(c[1]), "p2": float(c[2]), "p3": float(c[3]),
                                    "range_half_width": h},
                 requires=(var,) + (("omega_m",) if times else ()), short_stroke=True,
+                level_carrier=dict(times) if times else {"op": "const"},
             ))
     return out
 
