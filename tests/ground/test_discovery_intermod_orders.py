@@ -5,40 +5,21 @@ Q_red = f(w - e), f(x) = K x + k3 x^3, holds 3 k3 w e^2, whose cross term is a s
 -3 k3 E1 E2 w cos(3 theta_m + a + b). Its sign follows the load's, so the plain order spectrum averages it away
 and it is not among the catalog's orders (1, 2, 4): before this pass it was never a candidate. The sums and
 differences of the tried orders are candidates now, and selection (CV, fold majority, Wald) decides.
-Synthetic plant written here (numpy only, no hd_sim); about 15 s.
+Synthetic plant: `twist_plant.torsion_plant` (numpy only, no hd_sim); about 15 s.
 """
 
 import numpy as np
 import pytest
 
 from hd_ground.discovery.core import discover_signal
-from hd_ground.discovery.data import Dataset
 
-FS, T_BAG, N_BAGS, N = 500.0, 8.0, 4, 80.0
+from .twist_plant import torsion_plant
+
 K, K3, E1, E2 = 5.0e5, 1.0e11, 2.0e-4, 2.0e-4
 
 
 def _plant(seed: int = 2):
-    rng = np.random.default_rng(seed)
-    n = int(FS * T_BAG)
-    t = np.arange(n) / FS
-    cols = {k: [] for k in ("theta_m", "omega_m", "alpha_m", "theta_f", "phi", "windup", "windup_dot", "Q_red")}
-    for i in range(N_BAGS):
-        th = 40.0 * np.sin(2 * np.pi * (0.2 + 0.03 * i) * t)
-        om = np.gradient(th, t)
-        wu = 2.5e-3 * np.sin(2 * np.pi * (0.13 + 0.02 * i) * t + i) + 3e-4 * np.sin(2 * np.pi * 1.7 * t)
-        wud = np.gradient(wu, t)
-        x = wu - E1 * np.sin(th + 0.3) - E2 * np.sin(2 * th + 0.7)  # the spring's own deflection
-        Q = K * x + K3 * x**3 + 50.0 * wud + rng.normal(0, 3.0, n)
-        for k, v in (("theta_m", th), ("omega_m", om), ("alpha_m", np.gradient(om, t)), ("theta_f", th / N - wu),
-                     ("phi", -wu), ("windup", wu), ("windup_dot", wud), ("Q_red", Q)):
-            cols[k].append(v)
-    sig = {k: np.concatenate(v) for k, v in cols.items()}
-    bag = np.repeat(np.arange(N_BAGS), n)
-    frac = np.tile(t / t[-1], N_BAGS)
-    block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
-    ds = Dataset(sig, bag, block, frac, np.tile(t, N_BAGS), bag.copy(), [f"bag{i}" for i in range(N_BAGS)], N, 0.1)
-    return ds, bag == N_BAGS - 1
+    return torsion_plant(lambda x: K * x + K3 * x**3, lambda th: E1 * np.sin(th + 0.3) + E2 * np.sin(2 * th + 0.7), seed)
 
 
 def test_the_intermodulation_order_of_two_ripples_through_a_cubic_law_is_found():

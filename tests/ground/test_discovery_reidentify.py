@@ -1,26 +1,16 @@
 """Discovery's second looks (issue 10): the friction transition width identified again once the undeclared
 effects are modelled, and the torsion law's polynomial degree chosen by the cross-validated error.
 
-Synthetic plants written here (numpy only, no hd_sim).
+Synthetic plants written here and in `twist_plant` (numpy only, no hd_sim).
 """
 
 import numpy as np
 import pytest
 
 from hd_ground.discovery.core import discover_signal
-from hd_ground.discovery.data import Dataset
 
-FS, T_BAG, N_BAGS, N = 500.0, 8.0, 4, 80.0
+from .twist_plant import FS, N, N_BAGS, T_BAG, dataset, torsion_plant
 
-
-def _dataset(cols: dict, t: np.ndarray) -> tuple[Dataset, np.ndarray]:
-    sig = {k: np.concatenate(v) for k, v in cols.items()}
-    n = len(t)
-    bag = np.repeat(np.arange(N_BAGS), n)
-    frac = np.tile(t / t[-1], N_BAGS)
-    block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
-    ds = Dataset(sig, bag, block, frac, np.tile(t, N_BAGS), bag.copy(), [f"bag{i}" for i in range(N_BAGS)], N, 0.1)
-    return ds, bag == N_BAGS - 1
 
 
 EPS_TRUE, T_C, B, J, A_OUT = 1.0, 0.06, 8e-4, 3e-4, 0.075
@@ -43,7 +33,7 @@ def _short_stroke_plant(seed: int = 0):
         for k, v in (("theta_m", th), ("omega_m", w + rng.normal(0, 0.005, n)), ("alpha_m", al), ("theta_f", thf),
                      ("tau_m", tau)):
             cols[k].append(v)
-    return _dataset(cols, t)
+    return dataset(cols, t)
 
 
 def test_transition_width_is_identified_again_given_the_found_effect():
@@ -60,20 +50,7 @@ K, K3 = 5.0e5, 1.0e11
 
 def _torsion_plant(k5: float, seed: int = 1):
     """Q_red = K w + k3 w^3 + k5 w^5 + c w' + noise, w the wind-up, over a load sweep."""
-    rng = np.random.default_rng(seed)
-    n = int(FS * T_BAG)
-    t = np.arange(n) / FS
-    cols = {k: [] for k in ("theta_m", "omega_m", "alpha_m", "theta_f", "phi", "windup", "windup_dot", "Q_red")}
-    for i in range(N_BAGS):
-        th = 40.0 * np.sin(2 * np.pi * (0.2 + 0.03 * i) * t)
-        w = np.gradient(th, t)
-        wu = 2.5e-3 * np.sin(2 * np.pi * (0.13 + 0.02 * i) * t + i) + 3e-4 * np.sin(2 * np.pi * 1.7 * t)
-        wud = np.gradient(wu, t)
-        Q = K * wu + K3 * wu**3 + k5 * wu**5 + 50.0 * wud + rng.normal(0, 3.0, n)
-        for k, v in (("theta_m", th), ("omega_m", w), ("alpha_m", np.gradient(w, t)), ("theta_f", th / N - wu),
-                     ("phi", -wu), ("windup", wu), ("windup_dot", wud), ("Q_red", Q)):
-            cols[k].append(v)
-    return _dataset(cols, t)
+    return torsion_plant(lambda x: K * x + K3 * x**3 + k5 * x**5, seed=seed)
 
 
 @pytest.mark.parametrize("k5", [0.0, -2.0e15])

@@ -1,0 +1,42 @@
+"""Synthetic Q_red plant shared by the discovery tests on the twist side (numpy only, no hd_sim).
+
+Four 8 s bags at 500 Hz (the last held out, five blocks each): a motor sweep theta_m = 40 sin(2 pi f_i t), a wind-up
+w of a load sweep plus a 1.7 Hz ripple, and Q_red = spring(x) + 50 w' + N(0, 3 N*m) with x = w - e(theta_m) the
+spring's own deflection (e the position error inside it, none by default).
+"""
+
+import numpy as np
+
+from hd_ground.discovery.data import Dataset
+
+FS, T_BAG, N_BAGS, N = 500.0, 8.0, 4, 80.0
+
+
+def dataset(cols: dict, t: np.ndarray) -> tuple[Dataset, np.ndarray]:
+    """The bags' columns (a list per signal) as a discovery Dataset and its held-out mask (the last bag)."""
+    sig = {k: np.concatenate(v) for k, v in cols.items()}
+    n = len(t)
+    bag = np.repeat(np.arange(N_BAGS), n)
+    frac = np.tile(t / t[-1], N_BAGS)
+    block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
+    ds = Dataset(sig, bag, block, frac, np.tile(t, N_BAGS), bag.copy(), [f"bag{i}" for i in range(N_BAGS)], N, 0.1)
+    return ds, bag == N_BAGS - 1
+
+
+def torsion_plant(spring, position_error=None, seed: int = 1) -> tuple[Dataset, np.ndarray]:
+    """``spring(x)``: the torsion law's torque at deflection x; ``position_error(theta_m)``: e inside the spring."""
+    rng = np.random.default_rng(seed)
+    n = int(FS * T_BAG)
+    t = np.arange(n) / FS
+    cols = {k: [] for k in ("theta_m", "omega_m", "alpha_m", "theta_f", "phi", "windup", "windup_dot", "Q_red")}
+    for i in range(N_BAGS):
+        th = 40.0 * np.sin(2 * np.pi * (0.2 + 0.03 * i) * t)
+        om = np.gradient(th, t)
+        wu = 2.5e-3 * np.sin(2 * np.pi * (0.13 + 0.02 * i) * t + i) + 3e-4 * np.sin(2 * np.pi * 1.7 * t)
+        wud = np.gradient(wu, t)
+        x = wu if position_error is None else wu - position_error(th)
+        Q = spring(x) + 50.0 * wud + rng.normal(0, 3.0, n)
+        for k, v in (("theta_m", th), ("omega_m", om), ("alpha_m", np.gradient(om, t)), ("theta_f", th / N - wu),
+                     ("phi", -wu), ("windup", wu), ("windup_dot", wud), ("Q_red", Q)):
+            cols[k].append(v)
+    return dataset(cols, t)
