@@ -5,7 +5,7 @@ Q_red = f(w - e), f(x) = K x + k3 x^3, holds 3 k3 w e^2, whose cross term is a s
 -3 k3 E1 E2 w cos(3 theta_m + a + b). Its sign follows the load's, so the plain order spectrum averages it away
 and it is not among the catalog's orders (1, 2, 4): before this pass it was never a candidate. The sums and
 differences of the tried orders are candidates now, and selection (CV, fold majority, Wald) decides.
-Synthetic plant: `twist_plant.torsion_plant` (numpy only, no hd_sim); about 15 s.
+Synthetic plant: `synthetic.torsion_plant` (numpy only, no hd_sim); about 15 s.
 """
 
 import numpy as np
@@ -13,7 +13,7 @@ import pytest
 
 from hd_ground.discovery.core import discover_signal
 
-from .twist_plant import torsion_plant
+from .synthetic import torsion_plant
 
 K, K3, E1, E2 = 5.0e5, 1.0e11, 2.0e-4, 2.0e-4
 

@@ -17,6 +17,8 @@ from hd_ground.discovery.prefilter import implied_kernel, shift_samples, smooth_
 from hd_twin.identify import presliding_state
 from hd_twin.speedtiming import sg2_derivative
 
+from .synthetic import dataset
+
 FS, SUB, T_BAG, N_BAGS = 500.0, 40, 6.0, 4
 J, T_C, B, D_TRUE = 0.01, 1.0, 0.01, 4e-4
 T_S, OMEGA_S = 2.0, 0.4
@@ -87,12 +89,7 @@ def _hard_reversal_plant(t_bag: float, stribeck: bool) -> tuple[Dataset, np.ndar
                      ("alpha_m", sg2_derivative(w_log, t, np.zeros(n, int), 0.02)),
                      ("tau_m", tau.reshape(n, SUB).mean(1) + rng.normal(0, 0.02, n))):
             cols[k].append(v)
-    sig = {k: np.concatenate(v) for k, v in cols.items()}
-    bag = np.repeat(np.arange(N_BAGS), n)
-    frac = np.tile(t / t[-1], N_BAGS)
-    block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
-    ds = Dataset(sig, bag, block, frac, np.tile(t, N_BAGS), bag.copy(), [f"bag{i}" for i in range(N_BAGS)], 100.0, 0.1)
-    return ds, bag == N_BAGS - 1
+    return dataset(cols, t, ratio=100.0)
 
 
 def test_presliding_distance_is_recovered_on_the_filtered_equation():

@@ -14,6 +14,8 @@ from hd_ground.discovery.data import Dataset
 from hd_ground.discovery.library import state_var
 from hd_twin.identify import IdentifyError, presliding_state
 
+from .synthetic import dataset
+
 FS, T_BAG, N_BAGS = 500.0, 8.0, 4
 J, T_C, B, D_TRUE, EPS_TRUE = 0.01, 1.0, 0.01, 2e-3, 0.5
 
@@ -50,12 +52,7 @@ def _plant(law: str, seed: int = 0) -> tuple[Dataset, np.ndarray]:
         tau = J * al + T_C * fr + B * w + rng.normal(0, 0.02, n)
         for k, v in (("theta_m", th), ("omega_m", w + rng.normal(0, 0.005, n)), ("alpha_m", al), ("tau_m", tau)):
             cols[k].append(v)
-    sig = {k: np.concatenate(v) for k, v in cols.items()}
-    bag = np.repeat(np.arange(N_BAGS), n)
-    frac = np.tile(t / t[-1], N_BAGS)
-    block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
-    ds = Dataset(sig, bag, block, frac, np.tile(t, N_BAGS), bag.copy(), [f"bag{i}" for i in range(N_BAGS)], 100.0, 0.1)
-    return ds, bag == N_BAGS - 1
+    return dataset(cols, t, ratio=100.0)
 
 
 @pytest.mark.parametrize("law", ["dahl", "tanh"])

@@ -1,7 +1,7 @@
 """Discovery's second looks (issue 10): the friction transition width identified again once the undeclared
 effects are modelled, and the torsion law's polynomial degree chosen by the cross-validated error.
 
-Synthetic plants written here and in `twist_plant` (numpy only, no hd_sim).
+Synthetic plants written here and in `synthetic` (numpy only, no hd_sim).
 """
 
 import numpy as np
@@ -9,7 +9,7 @@ import pytest
 
 from hd_ground.discovery.core import discover_signal
 
-from .twist_plant import FS, N, N_BAGS, T_BAG, dataset, torsion_plant
+from .synthetic import FS, N, N_BAGS, T_BAG, dataset, torsion_plant
 
 
 

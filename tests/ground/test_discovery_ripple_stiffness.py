@@ -3,7 +3,7 @@
 A kinematic error e(theta_m) inside the spring gives Q_red = f(w - e) ~ f(w) - f'(w) e; with a cubic law
 f = K w + k3 w^3 that is the plain ripple K e plus 3 k3 w^2 e. The catalog's ``theta_m:k:stiff`` group
 (w^2 sin/cos(k theta_m)) must join the plain ripple when the law is curved, and stay out when it is linear.
-Synthetic plant: `twist_plant.torsion_plant` (numpy only, no hd_sim).
+Synthetic plant: `synthetic.torsion_plant` (numpy only, no hd_sim).
 """
 
 import numpy as np
@@ -11,7 +11,7 @@ import pytest
 
 from hd_ground.discovery.core import discover_signal
 
-from .twist_plant import torsion_plant
+from .synthetic import torsion_plant
 
 K, E2, PSI = 5.0e5, 4.0e-5, 0.7
 

@@ -1,6 +1,7 @@
-"""Synthetic Q_red plant shared by the discovery tests on the twist side (numpy only, no hd_sim).
+"""Synthetic discovery datasets shared by the tests (numpy only, no hd_sim).
 
-Four 8 s bags at 500 Hz (the last held out, five blocks each): a motor sweep theta_m = 40 sin(2 pi f_i t), a wind-up
+``dataset``: per-bag columns as a discovery Dataset, five blocks per bag, the last bag held out. ``torsion_plant``,
+the twist-side Q_red plant: four 8 s bags at 500 Hz (the last held out, five blocks each): a motor sweep theta_m = 40 sin(2 pi f_i t), a wind-up
 w of a load sweep plus a 1.7 Hz ripple, and Q_red = spring(x) + 50 w' + N(0, 3 N*m) with x = w - e(theta_m) the
 spring's own deflection (e the position error inside it, none by default).
 """
@@ -12,15 +13,16 @@ from hd_ground.discovery.data import Dataset
 FS, T_BAG, N_BAGS, N = 500.0, 8.0, 4, 80.0
 
 
-def dataset(cols: dict, t: np.ndarray) -> tuple[Dataset, np.ndarray]:
-    """The bags' columns (a list per signal) as a discovery Dataset and its held-out mask (the last bag)."""
+def dataset(cols: dict, t: np.ndarray, ratio: float = N) -> tuple[Dataset, np.ndarray]:
+    """The bags' columns (a list per signal, one array per bag on the common time ``t``) as a discovery Dataset with
+    gear ratio ``ratio``, and its held-out mask (the last bag)."""
     sig = {k: np.concatenate(v) for k, v in cols.items()}
-    n = len(t)
-    bag = np.repeat(np.arange(N_BAGS), n)
-    frac = np.tile(t / t[-1], N_BAGS)
+    n, n_bags = len(t), len(next(iter(cols.values())))
+    bag = np.repeat(np.arange(n_bags), n)
+    frac = np.tile(t / t[-1], n_bags)
     block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
-    ds = Dataset(sig, bag, block, frac, np.tile(t, N_BAGS), bag.copy(), [f"bag{i}" for i in range(N_BAGS)], N, 0.1)
-    return ds, bag == N_BAGS - 1
+    ds = Dataset(sig, bag, block, frac, np.tile(t, n_bags), bag.copy(), [f"bag{i}" for i in range(n_bags)], ratio, 0.1)
+    return ds, bag == n_bags - 1
 
 
 def torsion_plant(spring, position_error=None, seed: int = 1) -> tuple[Dataset, np.ndarray]:
