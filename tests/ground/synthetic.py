@@ -1,6 +1,6 @@
 """Synthetic discovery datasets shared by the tests (numpy only, no hd_sim).
 
-``dataset``: per-bag columns as a discovery Dataset, five blocks per bag, the last bag held out. ``torsion_plant``,
+``stribeck_design``: the Stribeck friction's columns for a shape search; ``dataset``: per-bag columns as a discovery Dataset, five blocks per bag, the last bag held out. ``torsion_plant``,
 the twist-side Q_red plant: four 8 s bags at 500 Hz (the last held out, five blocks each): a motor sweep theta_m = 40 sin(2 pi f_i t), a wind-up
 w of a load sweep plus a 1.7 Hz ripple, and Q_red = spring(x) + 50 w' + N(0, 3 N*m) with x = w - e(theta_m) the
 spring's own deflection (e the position error inside it, none by default).
@@ -42,3 +42,12 @@ def torsion_plant(spring, position_error=None, seed: int = 1) -> tuple[Dataset, 
                      ("phi", -wu), ("windup", wu), ("windup_dot", wud), ("Q_red", Q)):
             cols[k].append(v)
     return dataset(cols, t)
+
+
+def stribeck_design(w: np.ndarray):
+    """Columns [tanh(w / eps), exp(-(|w| / omega_s)^delta) tanh(w / eps), w] (T_C, dT, viscous b) as a function of the
+    shapes ``omega_s``, ``delta``, ``eps``: a design for ``hd_twin.identify.fit_separable`` / ``vp_shape``."""
+    def design(sh):
+        sg = np.tanh(w / sh["eps"])
+        return np.column_stack([sg, np.exp(-(np.abs(w) / sh["omega_s"]) ** sh["delta"]) * sg, w])
+    return design

@@ -15,15 +15,10 @@ import pytest
 
 from hd_twin.identify import Shape, _grid_minima, fit_separable
 
+from .synthetic import stribeck_design
+
 T_C, DT, B = 1.0, 1.2, 0.01
 N, N_BLOCKS = 6000, 12
-
-
-def _design(w):
-    def design(sh):
-        sg = np.tanh(w / sh["eps"])
-        return np.column_stack([sg, np.exp(-(np.abs(w) / sh["omega_s"]) ** sh["delta"]) * sg, w])
-    return design
 
 
 def _shapes():
@@ -47,8 +42,8 @@ def _plant(w_s, delta, eps, seed=0, ramp=40):
 @pytest.mark.parametrize("w_s,delta,eps", [(8.0, 1.5, 0.8), (5.0, 1.5, 0.8)])
 def test_joint_shape_search_reaches_the_true_basin(w_s, delta, eps):
     w, y, block = _plant(w_s, delta, eps)
-    f = fit_separable(y, _design(w), ["T_C", "dT", "b"], block, _shapes(), jackknife=False, positive=[1])
-    truth = fit_separable(y, _design(w), ["T_C", "dT", "b"], block,
+    f = fit_separable(y, stribeck_design(w), ["T_C", "dT", "b"], block, _shapes(), jackknife=False, positive=[1])
+    truth = fit_separable(y, stribeck_design(w), ["T_C", "dT", "b"], block,
                           [Shape("omega_s", w_s, w_s), Shape("delta", delta, delta), Shape("eps", eps, eps)],
                           jackknife=False)
     # the search finds a CV error no higher than the true shape's (main's cell-confined refinement: 3.7 % and

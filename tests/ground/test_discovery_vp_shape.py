@@ -13,19 +13,14 @@ import pytest
 
 from hd_twin.identify import Shape, cv_residuals, fit_separable, vp_shape
 
+from .synthetic import stribeck_design
+
 T_C, DT, W_S, DELTA, EPS, B = 1.0, 1.2, 4.0, 1.5, 0.8, 0.01
 N_BLOCKS = 12
 
 
 def _friction(w):
     return (T_C + DT * np.exp(-(np.abs(w) / W_S) ** DELTA)) * np.tanh(w / EPS) + B * w
-
-
-def _design(w):
-    def design(sh):
-        sg = np.tanh(w / sh["eps"])
-        return np.column_stack([sg, np.exp(-(np.abs(w) / sh["omega_s"]) ** sh["delta"]) * sg, w])
-    return design
 
 
 def _shapes():
@@ -48,8 +43,8 @@ def test_stribeck_shape_recovered_within_its_sandwich_uncertainty(seed):
     t = np.arange(n) / n
     w = 25.0 * np.sin(2 * np.pi * 3 * t) * np.abs(np.sin(2 * np.pi * 0.5 * t + 0.3)) + rng.normal(scale=0.02, size=n)
     y, block = _data(w, seed)
-    prof = fit_separable(y, _design(w), ["T_C", "dT", "b"], block, _shapes(), jackknife=False)
-    vp = vp_shape(y, _design(w), block, _shapes(), prof.shape)
+    prof = fit_separable(y, stribeck_design(w), ["T_C", "dT", "b"], block, _shapes(), jackknife=False)
+    vp = vp_shape(y, stribeck_design(w), block, _shapes(), prof.shape)
     assert vp.weak == []
     assert vp.cv_rmse <= vp.cv_rmse_start + 1e-12  # the refinement never raises the CV error
     for name, true in (("omega_s", W_S), ("delta", DELTA), ("eps", EPS)):
@@ -67,8 +62,8 @@ def test_shape_in_a_speed_gap_is_reported_with_a_wide_uncertainty():
     fast = np.sign(np.sin(2 * np.pi * 2 * t)) * (18.0 + 4.0 * np.abs(np.sin(2 * np.pi * 7 * t)))
     w = np.where((np.arange(n) // 250) % 2 == 0, slow, fast) + rng.normal(scale=0.02, size=n)
     y, block = _data(w, 3)
-    prof = fit_separable(y, _design(w), ["T_C", "dT", "b"], block, _shapes(), jackknife=False)
-    vp = vp_shape(y, _design(w), block, _shapes(), prof.shape)
+    prof = fit_separable(y, stribeck_design(w), ["T_C", "dT", "b"], block, _shapes(), jackknife=False)
+    vp = vp_shape(y, stribeck_design(w), block, _shapes(), prof.shape)
     # the knee is interpolated: omega_s is uncertain by more than half its size (sweep above: well below), and
     # the truth is within the reported uncertainty
     assert vp.se["omega_s"] > 0.5 * vp.shape["omega_s"], (vp.shape, vp.se)
