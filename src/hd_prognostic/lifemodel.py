@@ -912,6 +912,12 @@ def _hessian(f, x: np.ndarray, f0: float, h: float) -> np.ndarray:
 NOISE_BOX = {"atanh_rho": (-3.0, 3.0), "log_kappa": (-9.0, 5.0)}
 
 
+def _in_noise_box(th: dict) -> bool:
+    """Whether the noise parameters of ``th`` (rho always, kappa with the level-dependent noise) lie inside
+    :data:`NOISE_BOX`: the one place of those bounds for the likelihood and for :func:`_noise_regularity`."""
+    return all(lo < th[k] < hi for k, (lo, hi) in NOISE_BOX.items() if k == "atanh_rho" or k in th)
+
+
 def _noise_regularity(nll, x: np.ndarray, names: list[str], h: float = 3e-3, z: float = 1.959963984540054) -> dict:
     """Whether a level-noise fit's maximum is regular enough for AIC to compare it with the constant noise.
 
@@ -1331,15 +1337,13 @@ class LifeModel:
 
             def nll(xs, fresh=False):  # fresh: grids from the population law, not the last call's windows
                 th, ins = unpack(xs)
-                if not (-6 < th["log_b"] < 2.5 and -9 < th["log_s"] < 3 and abs(th["atanh_rho"]) < 3.0):
+                if not (-6 < th["log_b"] < 2.5 and -9 < th["log_s"] < 3 and _in_noise_box(th)):
                     return 1e30
                 if kind == "latent" and not -9 < th["log_sD"] < 2:
                     return 1e30
                 if kind == "observable" and not lo_sY < th["log_sY"] < lo_sY + 15.0:
                     return 1e30
                 if fam == "paris" and not (-12 < th["mu"] < 12 and abs(th.get("log_D0", 0.0)) < 12):
-                    return 1e30
-                if "log_kappa" in th and not -9 < th["log_kappa"] < 5:
                     return 1e30
                 z, f, dz = batch.grid(th, math.exp(th["log_b"]), ins, windows=None if fresh else windows)
                 with np.errstate(divide="ignore"):
