@@ -67,10 +67,7 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
         sg["threshold"] = _label(m)
-        if "noise_rule" in m.fit_info:  # noise="auto": the noise kept and the level fit's regularity
-            sg["noise"] = m.fit_info["noise"]
-            sg["noise_rule"] = m.fit_info["noise_rule"]
-            sg["noise_aic"] = m.fit_info["noise_aic"]
+        sg.update(_noise_fields(m))
         if progress:
             print(f"  {label} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f}"
                   f" cov {sg['coverage_p5_p95']:.2f} CRA {sg['cra']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f}"
@@ -82,6 +79,14 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
 
     res = _run_folds(fold, [i for i, u in enumerate(units) if u.events.failure is not None])
     return [r[0] for r in res], [r[1] for r in res], [r[2] for r in res]
+
+
+def _noise_fields(m) -> dict:
+    """A noise="auto" fit's record for the fold's row: the noise kept, the level fit's regularity and the AICs."""
+    fi = m.fit_info
+    if "noise_rule" not in fi:
+        return {}
+    return {"noise": fi["noise"], "noise_rule": fi["noise_rule"], "noise_aic": fi["noise_aic"]}
 
 
 def _noise_txt(m):
@@ -465,8 +470,7 @@ def _louo_subset(units, eols, args, name, level=None):
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)
         sg["threshold"] = _label(m)
-        if "noise_rule" in m.fit_info:  # noise="auto": the noise kept and the level fit's regularity
-            sg.update(noise=m.fit_info["noise"], noise_rule=m.fit_info["noise_rule"], noise_aic=m.fit_info["noise_aic"])
+        sg.update(_noise_fields(m))
         print(f"  {name} {u.unit}: EOL {eols[u.unit]:g}, life model in-cone {sg['frac_in_cone_lambda_ge_0.5']:.2f} "
               f"cov {sg['coverage_p5_p95']:.2f} | UKF {su['frac_in_cone_lambda_ge_0.5']:.2f} / "
               f"{su['coverage_p5_p95']:.2f} | plug-in {sp['frac_in_cone_lambda_ge_0.5']:.2f} / "
