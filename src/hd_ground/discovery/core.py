@@ -530,8 +530,9 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
     considered; a refinement (``Candidate.after``) competes only once its family is selected.
 
     ``carrier(gi)`` (the group's ``Candidate.level_carrier`` on the fit rows, or None): a group with a carrier, a
-    function of a position, must also pass the selection's rules (gain, fold majority, SE) with a level of its
-    carrier per block free in both models (:func:`within_block_sse`); one that gains only by levels between blocks
+    function of a position, must also reach ``opt.min_gain`` and one paired standard error with a level of its
+    carrier per block free in both models (:func:`within_block_sse`; the fold count is judged once, on the pooled
+    CV), over the blocks where its position moves; one that gains only by levels between blocks
     is rejected at this step ("reject (between-block levels)") and competes again once the model has changed.
     """
     cur_idx = list(base_idx)
@@ -590,8 +591,7 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             # the pooled CV above; the fold count, a discrete statistic, is not asked twice)
             cw, ew, info = within_block_sse(gram, cur_idx, _model(base_idx, groups, selected + [gi]), *car)
             if info.any():
-                gw, fw, tw, why = _identified_against(cw[info], ew[info], opt)
-                why = [w for w in why if not w.startswith("better in")]
+                gw, fw, tw, why = _identified_against(cw[info], ew[info], opt, fold_rule=False)
             else:
                 gw, fw, tw, why = 0.0, 0.0, float("-inf"), ["its position does not move within any block"]
             rec.update(within_gain=float(gw), within_folds=fw, within_t=tw, within_blocks=int(info.sum()))
@@ -1198,7 +1198,6 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         return confirmed[gi][1]
 
     carriers: dict[str, np.ndarray] = {}
-
     stills: dict[str, np.ndarray] = {}
 
     def carrier(gi):
@@ -1210,7 +1209,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             return None
         key = repr(sorted(spec.items()))
         if key not in carriers:
-            carriers[key] = basis_matrix([spec], sig)[fit][:, 0]
+            carriers[key] = basis_matrix([spec], sf)[:, 0]
         if cand.variable not in stills:
             stills[cand.variable] = still_blocks(sf[cand.variable], ds.block[fit], ds.segment[fit])
         return carriers[key], stills[cand.variable]
@@ -1598,18 +1597,20 @@ def choose_speed_timing(ds_logged: Dataset, ds_retimed: Dataset, heldout: np.nda
                        "as logged")
 
 
-def _identified_against(sse_ref: np.ndarray, sse: np.ndarray, opt: Options) -> tuple[float, float, float, list[str]]:
+def _identified_against(sse_ref: np.ndarray, sse: np.ndarray, opt: Options,
+                        fold_rule: bool = True) -> tuple[float, float, float, list[str]]:
     """An alternative signal reading (derivative window, twist smoother) against the reference one, by the
     selection's rules on the per-block CV SSE: (CV gain, fraction of blocks better, paired t, the rules it
-    fails: gain < ``opt.min_gain``, better in < ``opt.fold_majority`` of the blocks, within one standard error).
-    Shared by :func:`choose_alpha_window` and :func:`choose_twist_window`; each adds its own range-edge rule."""
+    fails: gain < ``opt.min_gain``, better in < ``opt.fold_majority`` of the blocks (unless ``fold_rule`` is
+    False), within one standard error). Shared by :func:`choose_alpha_window` and :func:`choose_twist_window`
+    (each adds its own range-edge rule) and by the within-block check of :func:`select_groups`."""
     gain = 1.0 - float(sse.sum() / sse_ref.sum()) if sse_ref.sum() > 0 else 0.0
     folds = float(np.mean(sse < sse_ref))
     t_pair = _paired_t(sse_ref, sse)
     why = []
     if gain < opt.min_gain:
         why.append(f"gain < {opt.min_gain:.0%}")
-    if folds < opt.fold_majority:
+    if fold_rule and folds < opt.fold_majority:
         why.append(f"better in < {opt.fold_majority:.0%} of the blocks")
     if t_pair < 1.0:
         why.append("within one standard error")
