@@ -395,7 +395,7 @@ def fit_separable(y: np.ndarray, design: Callable[[dict], np.ndarray], names: li
             # delta and width), so the refinement confined to its cell can stop on the cell's edge, and the best
             # grid point can sit in a secondary basin: refined also from each of the grid's lowest local minima
             # (:func:`_grid_minima`) within the whole searched range; the lowest CV error of all wins
-            b2, f2 = _refine_from_grid_minima(shapes, grids, vv, lambda v: cv_obj(v, use), penalty, minimize)
+            b2, f2 = _refine_from_grid_minima(shapes, grids, vv, lambda v: cv_obj(v, use), penalty)
             if f2 < f0:
                 best, f0 = b2, f2
         return best, f0, prof
@@ -485,10 +485,12 @@ def _grid_minima(vv: np.ndarray, penalty: float, k: int = MAX_GRID_STARTS) -> li
     return [tuple(int(j) for j in loc[i]) for i in order[:k]]
 
 
-def _refine_from_grid_minima(shapes, grids, vv, obj, penalty, minimize):
+def _refine_from_grid_minima(shapes, grids, vv, obj, penalty):
     """Nelder-Mead on the CV error from each of the grid's lowest local minima (:func:`_grid_minima`), bounded by
     the searched range, with a first simplex of half a grid cell per shape (search coordinates); the lowest CV
     error wins (the grid's best point when no refinement improves on it). Returns (shape values, CV SSE)."""
+    from scipy.optimize import minimize
+
     lo = [s.to_u(s.lo) for s in shapes]
     hi = [s.to_u(s.hi) for s in shapes]
 
