@@ -75,7 +75,8 @@ def run_ablation(bags, out_dir: str | Path, condition: str = "load", preset: str
             res = train_twin(sub, None, cfg, split=(tr, va), progress=progress)
             fs_model = res.config["preprocessing"]["fs_model"]
             segs = [s for i in ood for s in D.preprocess(missions[i], fs_model, T_ref=res.pinn.params.T_ref,
-                                                         speed_timing=res.config.get("speed_timing"))]
+                                                         speed_timing=res.config.get("speed_timing"),
+                                                         twist_smoothing=res.config.get("twist_smoothing"))]
             m_ood = evaluate(res.pinn, segs, res.norm)
             rows.append({"seed": seed, "variant": variant, "in_range": res.metrics["validation"], "out_of_range": m_ood,
                          "train_time_s": res.metrics["train_time_s"], "lambda_c_final": res.metrics["lambda_c_final"]})

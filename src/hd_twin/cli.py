@@ -13,7 +13,7 @@ from pathlib import Path
 
 def _model_config(path: str | None) -> dict:
     """A model config (JSON or YAML): declared_effects, extra_terms, params (dict or YAML path), model_version, parent,
-    speed_timing."""
+    speed_timing, twist_smoothing."""
     if not path:
         return {}
     import yaml
@@ -49,6 +49,14 @@ def _model_config(path: str | None) -> dict:
 
         try:
             out["speed_timing"] = SpeedTiming.from_config(d["speed_timing"], f"{p} speed_timing").to_config()
+        except ValueError as e:
+            raise SystemExit(str(e)) from None
+    if d.get("twist_smoothing"):  # discovery's smoothing of theta_f for the twist (hd_twin.twistsmooth)
+        from .twistsmooth import TwistSmoothing
+
+        try:
+            out["twist_smoothing"] = TwistSmoothing.from_config(d["twist_smoothing"],
+                                                                f"{p} twist_smoothing").to_config()
         except ValueError as e:
             raise SystemExit(str(e)) from None
     return out
@@ -157,6 +165,9 @@ def _show(args) -> int:
     print(f"declared effects: {cfg['declared_effects']}  extra terms: {len(cfg.get('extra_terms', []))}")
     st = {k: v for k, v in (cfg.get("speed_timing") or {}).items() if k != "window_s"}
     print("speed timing: " + (", ".join(f"{k} re-timed by {v['tau_s'] * 1e3:.3g} ms" for k, v in st.items()) or "as logged"))
+    ts = cfg.get("twist_smoothing") or {}
+    print("twist: " + (f"theta_f smoothed over {ts['window_s'] * 1e3:.3g} ms (Savitzky-Golay, order {ts.get('polyorder', 2)})"
+                       if ts.get("window_s") else "theta_f as logged"))
     if met:
         v = met["validation"]
         print(f"validation NRMSE {v['nrmse_pct']:.3f} %  R^2 {v['r2']:.5f}  max err {v['max_err']:.4g} N*m")

@@ -326,13 +326,15 @@ def decimation_for(fs: float, fs_model: float | None, where: str) -> int:
 
 
 def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_len: int = 16,
-               names: Sequence[str] | None = None, speed_timing=None) -> list[Segment]:
+               names: Sequence[str] | None = None, speed_timing=None, twist_smoothing=None) -> list[Segment]:
     """Split a Mission into gap-free, anti-aliased, decimated :class:`Segment` s at ``fs_model`` Hz.
 
     ``names``: the feature columns of ``Segment.F`` (default :data:`FEATURES`). ``speed_timing``: the
     model's ``config.json:speed_timing`` (dict or :class:`hd_twin.speedtiming.SpeedTiming`; None / empty:
     speeds as logged): the listed logged speeds are re-timed per segment at the bag rate, before anything
-    else sees them (the streaming twin does the same causally).
+    else sees them (the streaming twin does the same causally). ``twist_smoothing``: the model's
+    ``config.json:twist_smoothing`` (dict or :class:`hd_twin.twistsmooth.TwistSmoothing`; None / empty: theta_f
+    as logged): theta_f smoothed per segment at the bag rate, as discovery fitted the model's Q_red terms.
 
     Segments shorter than ``min_len`` samples (after decimation) are dropped.
     Raises ValueError naming the bag when the mission is unusable.
@@ -356,7 +358,11 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
     sos = antialias_sos(fs, dec)
     from .speedtiming import SpeedTiming  # noqa: PLC0415
 
+    from .twistsmooth import TwistSmoothing  # noqa: PLC0415
+
     timing = speed_timing if isinstance(speed_timing, SpeedTiming) else SpeedTiming.from_config(speed_timing)
+    smoothing = (twist_smoothing if isinstance(twist_smoothing, TwistSmoothing)
+                 else TwistSmoothing.from_config(twist_smoothing))
     t_all = np.asarray(mission.t, dtype=np.float64)
     out: list[Segment] = []
     for a, b in segment_bounds(mission.segment):
@@ -366,6 +372,7 @@ def preprocess(mission, fs_model: float | None = None, T_ref: float = 25.0, min_
         absent = ~np.isfinite(X).all(axis=0)  # inputs with no finite sample in this segment
         X[:, absent] = 0.0
         X = timing.apply_X(X, t_all[a:b])  # X itself when the model has no re-timing
+        X = smoothing.apply_X(X, fs)  # X itself when the model reads theta_f as logged
         Q = Q_all[a:b].copy()
         m = finite[a:b].copy()
         Qb = bridge_nan(Q)

@@ -20,10 +20,12 @@ FIR whose weights are designed once per rate (:mod:`hd_twin.streamfir`). Two mod
 
 * ``"causal"`` (the earlier behaviour, output for output): no delay; the newest samples of each call get
   the end-of-window (one-sided) rows, the older ones of the call the centre row, so the result depends on
-  how the stream is cut into calls; speeds re-timed causally (:class:`hd_twin.speedtiming.CausalRetimer`).
+  how the stream is cut into calls; speeds re-timed causally (:class:`hd_twin.speedtiming.CausalRetimer`), theta_f
+  smoothed causally (:class:`hd_twin.twistsmooth.CausalSmoother`).
 * ``"fixed_lag"``: the output of sample k is given out when sample k + lag arrives (:attr:`lag_samples`:
   half the derivative window at the model rate, plus half the re-timing window at the bag rate when the
-  model re-times speeds; e.g. 15 ms at 1 kHz, 12 ms at 250 Hz), with the centred derivative and edge rule
+  model re-times speeds, plus half theta_f's smoothing window when it smooths the twist, ``config.json:
+  twist_smoothing``, :mod:`hd_twin.twistsmooth`; e.g. 15 ms at 1 kHz, 12 ms at 250 Hz), with the centred derivative and edge rule
   of the batch twin, so the streamed outputs equal the batch ones (``hdphm twin eval``, training metrics)
   whatever the calls; :meth:`flush` gives out the last samples at the end of a segment (the batch
   right-edge fit). ``out["index"]`` may then be negative (a row of an earlier call); ``out["sample"]``
@@ -99,6 +101,10 @@ class StreamingTwin:
 
         self.speed_timing = SpeedTiming.from_config(self.config.get("speed_timing"),
                                                     f"{self.model_dir}/config.json speed_timing")
+        from .twistsmooth import TwistSmoothing  # noqa: PLC0415
+
+        self.twist_smoothing = TwistSmoothing.from_config(self.config.get("twist_smoothing"),
+                                                          f"{self.model_dir}/config.json twist_smoothing")
         self._cutoff = getattr(idf, "cutoff_hz", None) if idf is not None else None
         # edge samples after a reset: the derivative filter's window is not yet filled (hd_twin.data.edge_half_window)
         self._edge_half = D.edge_half_window(1.0 / self.fs_model, self._cutoff)
@@ -131,6 +137,9 @@ class StreamingTwin:
         # re-timing of the logged speeds at the input rate (None: speeds as logged)
         self._retimer = (self.speed_timing.streamer(self.fs_in, fixed_lag=self.mode == "fixed_lag")
                          if self.speed_timing.active else None)
+        # theta_f smoothed for the twist as the model's Q_red terms were fitted (None: as logged)
+        self._smoother = (self.twist_smoothing.streamer(self.fs_in, fixed_lag=self.mode == "fixed_lag")
+                          if self.twist_smoothing.active else None)
         self._zi = None
         self._last = None
         self._prev = None
@@ -159,11 +168,12 @@ class StreamingTwin:
     def lag_samples(self) -> int:
         """Input rows between a sample's arrival and its output in steady state (0 in ``causal`` mode): half the
         physics path's derivative window at the model rate (times the decimation) plus half the speed
-        re-timing window at the input rate. The first outputs after a reset come once a whole window is in."""
+        re-timing window and half theta_f's smoothing window at the input rate. The first outputs after a reset come once a whole window is in."""
         if self.mode != "fixed_lag":
             return 0
         lag = self._deriv.lag * self.decimation if self._deriv is not None else 0
-        return lag + (self._retimer.lag if self._retimer is not None else 0)
+        return (lag + (self._retimer.lag if self._retimer is not None else 0)
+                + (self._smoother.lag if self._smoother is not None else 0))
 
     @property
     def lag_s(self) -> float:
@@ -206,7 +216,8 @@ class StreamingTwin:
         if len(X) == 0:
             return self._empty()
         # hold the last finite value per input (the filter must not see NaN, nor the fixed-lag re-timing)
-        if self._sos is not None or (self._retimer is not None and self.mode == "fixed_lag"):
+        if self._sos is not None or ((self._retimer is not None or self._smoother is not None)
+                                     and self.mode == "fixed_lag"):
             X = X.copy()
             for j in range(X.shape[1]):
                 bad = ~np.isfinite(X[:, j])
@@ -219,6 +230,8 @@ class StreamingTwin:
             self._last = X[-1].copy()
         if self._retimer is not None:
             X = self._retimer.step(X)
+        if self._smoother is not None:
+            X = self._smoother.step(X)
         return self._model_rows(X, final=False)
 
     def flush(self) -> dict[str, np.ndarray]:
@@ -228,6 +241,9 @@ class StreamingTwin:
         if self.mode != "fixed_lag":
             return self._empty()
         X = self._retimer.flush() if self._retimer is not None else np.zeros((0, len(D.RAW_INPUTS)))
+        if self._smoother is not None:
+            parts = [self._smoother.step(X) if len(X) else np.zeros((0, len(D.RAW_INPUTS))), self._smoother.flush()]
+            X = np.vstack([p.reshape(-1, len(D.RAW_INPUTS)) for p in parts])
         return self._model_rows(X, final=True)
 
     def _model_rows(self, X: np.ndarray, final: bool) -> dict[str, np.ndarray]:

@@ -101,6 +101,8 @@ class TrainConfig:
     features: list[str] = field(default_factory=lambda: list(D.FEATURES))  # network inputs (names of hd_twin.data)
     # re-timing of the logged speeds (hd_twin.speedtiming config entry, written by discovery); {} = as logged
     speed_timing: dict = field(default_factory=dict)
+    # smoothing of theta_f for the twist (hd_twin.twistsmooth config entry, written by discovery); {} = as logged
+    twist_smoothing: dict = field(default_factory=dict)
 
     @classmethod
     def from_preset(cls, name: str, **overrides) -> "TrainConfig":
@@ -126,6 +128,9 @@ class TrainConfig:
         from .speedtiming import SpeedTiming  # noqa: PLC0415
 
         SpeedTiming.from_config(self.speed_timing, "training config: speed_timing")
+        from .twistsmooth import TwistSmoothing  # noqa: PLC0415
+
+        TwistSmoothing.from_config(self.twist_smoothing, "training config: twist_smoothing")
         if not isinstance(self.extra_terms, list) or not all(isinstance(t, dict) for t in self.extra_terms):
             raise ValueError("training config: extra_terms must be a list of term dicts")
         if self.physics_path not in ("auto", "identified", "none"):
@@ -433,7 +438,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         if progress:
             print(f"{_CR}pre-processing {k + 1}/{len(tr_idx) + len(va_idx)}", end="" if _CR else "\n", file=sys.stderr, flush=True)
         segs_by_m[i] = D.preprocess(missions[i], fs_model, T_ref=params.T_ref, names=cfg.features,
-                                    speed_timing=cfg.speed_timing)
+                                    speed_timing=cfg.speed_timing, twist_smoothing=cfg.twist_smoothing)
     if progress:
         print(file=sys.stderr)
     t_pre = time.perf_counter() - t0
@@ -568,6 +573,7 @@ def train_twin(missions: Sequence, out_dir: str | Path | None, cfg: TrainConfig,
         "declared_effects": list(cfg.declared_effects),
         "extra_terms": list(cfg.extra_terms),
         **({"speed_timing": dict(cfg.speed_timing)} if cfg.speed_timing else {}),
+        **({"twist_smoothing": dict(cfg.twist_smoothing)} if cfg.twist_smoothing else {}),
         "params": params.to_dict(),
         "calibrated_params": pinn.calibrated_params().to_dict() if cfg.calibrate else None,
         "preprocessing": {"fs_model": fs_model, "antialias": "causal Butterworth order 4, 0.8 x new Nyquist (when decimating)",
@@ -624,7 +630,7 @@ def eval_model(model_dir: str | Path, missions: Sequence) -> dict:
         where = mission_label(m)
         try:
             s_m = D.preprocess(m, fs_model, T_ref=pinn.params.T_ref, names=names,
-                               speed_timing=cfgd.get("speed_timing"))
+                               speed_timing=cfgd.get("speed_timing"), twist_smoothing=cfgd.get("twist_smoothing"))
         except ValueError as e:
             if len(missions) == 1:
                 raise

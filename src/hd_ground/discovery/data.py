@@ -280,19 +280,16 @@ def with_smoothed_twist(ds: Dataset, window: int) -> Dataset:
     divided by N (its step with it), so only the output angle is smoothed; the twist rate (from the speeds) and
     ``windup_q`` (the encoders' play, a model of the logged resolution) are unchanged. A quadratic smoother keeps
     a motion that is locally quadratic over the window; whether it helps is decided on the fit bags
-    (``core.choose_twist_window``), never assumed. Returns a new dataset; ``ds`` is unchanged."""
-    from scipy.signal import savgol_filter
+    (``core.choose_twist_window``), never assumed. The smoother is the twin's (``hd_twin.twistsmooth.smooth_angle``),
+    which the twin version discovery writes applies too (``config.json:twist_smoothing``). Returns a new dataset;
+    ``ds`` is unchanged."""
+    from hd_twin.twistsmooth import smooth_angle
 
     w = int(window)
     if w < 5 or w % 2 == 0:
         raise ValueError(f"twist smoothing window must be odd and >= 5 samples, got {window}")
     sig = dict(ds.signals)
-    thf = np.asarray(sig["theta_f"], float)
-    sm = thf.copy()
-    for sgi in np.unique(ds.segment):
-        idx = np.flatnonzero(ds.segment == sgi)
-        if len(idx) > w:
-            sm[idx] = savgol_filter(thf[idx], w, 2)
+    sm = smooth_angle(np.asarray(sig["theta_f"], float), ds.segment, w, 2)
     sig["phi"] = sm - sig["theta_m"] / ds.gear_ratio
     sig["windup"] = -sig["phi"]
     out = Dataset(sig, ds.bag, ds.block, ds.tfrac, ds.t, ds.segment, ds.bag_names, ds.gear_ratio, ds.torque_constant,

@@ -175,7 +175,7 @@ def run_discovery(
 
     report = build_report(results, split, ds, within, twin_dir, opt)
     # the twist the Q_red models were fitted with (core.choose_twist_window): theta_f's smoothing window in
-    # samples, 0 as logged (also in the new twin's discovery block; no twin node smooths theta_f yet)
+    # samples, 0 as logged (the new twin version's config.json:twist_smoothing carries it in seconds)
     report["twist_window_samples"] = twist_window
     new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log,
                                  speed_lags=ds.speed_lags, acceleration=report["acceleration"],
@@ -260,8 +260,10 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
     no twin input depends on it (the twin derives its own accelerations, ``hd_twin.data``; the found terms and
     the recalibrated T_C, b_visc, eps_omega are functions of speed, angle and current, and J_eq and the timing
     coefficient J tau_a are not written), so the twin needs no entry for it. ``twist_window`` (theta_f's smoothing
-    for the twist of the Q_red terms, ``core.choose_twist_window``; 0: as logged) is recorded in
-    ``discovery.twist_window_samples``: the Q_red terms were fitted on that twist; no twin node smooths theta_f yet."""
+    for the twist of the Q_red terms, ``core.choose_twist_window``; 0: as logged; samples at the first mission's
+    rate) goes into ``config.json:twist_smoothing`` (:mod:`hd_twin.twistsmooth`, the window in seconds) by the
+    speed timing's rule, so the twin reads the twist the Q_red terms were fitted on; ``discovery.twist_window_samples``
+    always records discovery's."""
     # the twin evaluates static terms sample by sample: a term on a pre-sliding state (a path history) goes
     # in its static form (hd_ground.discovery.core.static_term); one without such a form stays in the report
     new_terms, dropped = [], []
@@ -315,6 +317,12 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
         cfg["speed_timing"] = parent_timing
     if timing and not (twin is not None and "normalization" in cfg):
         cfg["speed_timing"] = timing  # physics-only version: the terms are evaluated on the speeds they were fitted on
+    smoothing = _twist_smoothing_entry(twist_window, missions)
+    parent_smoothing = cfg.pop("twist_smoothing", None)
+    if twin is not None and "normalization" in cfg and parent_smoothing:
+        cfg["twist_smoothing"] = parent_smoothing  # the copied network's inputs, until it is retrained
+    if smoothing and not (twin is not None and "normalization" in cfg):
+        cfg["twist_smoothing"] = smoothing  # the Q_red terms are evaluated on the twist they were fitted on
     cfg["discovery"] = {"speed_timing": timing or "speeds used as logged",
                         "acceleration": dict(acceleration or {}),
                         "twist_window_samples": int(twist_window),
@@ -327,7 +335,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
 
             tc = dict(cfg["train"])
             tc.update(declared_effects=decl, extra_terms=cfg["extra_terms"], model_version=cfg["model_version"],
-                      parent=str(twin_dir), speed_timing=dict(timing))
+                      parent=str(twin_dir), speed_timing=dict(timing), twist_smoothing=dict(smoothing))
             fields = TrainConfig.__dataclass_fields__
             log("retraining the twin with the new effects (hd_twin.train.train_twin) ...")
             train_twin(missions, dst, TrainConfig(**{k: v for k, v in tc.items() if k in fields}))
@@ -342,6 +350,16 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
     (dst / "config.json").write_text(json.dumps(json_safe(cfg), indent=2))
     log(f"new twin version {cfg['model_version']} written to {dst}")
     return dst
+
+
+def _twist_smoothing_entry(twist_window: int, missions) -> dict:
+    """``config.json:twist_smoothing`` for discovery's smoothing of theta_f (``twist_window`` samples at the
+    first mission's rate; {} when the twist was read as logged)."""
+    if not twist_window or not missions:
+        return {}
+    from hd_twin.twistsmooth import TwistSmoothing
+
+    return TwistSmoothing.from_samples(int(twist_window), float(missions[0].fs)).to_config()
 
 
 def _speed_timing_entry(speed_lags: dict, missions) -> dict:
