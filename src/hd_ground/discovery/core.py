@@ -866,26 +866,38 @@ def _is_derivative_basis(b: dict | None) -> bool:
     return b is not None and b.get("op") == "var" and b.get("var") in DERIVATIVE_SIGNALS
 
 
-def _swap_state(b: dict, old_var: str, new_var: str) -> dict:
-    """A basis spec with the state column ``old_var`` replaced by ``new_var`` (inside products too)."""
+def _swap_state(b: dict, old, new_var: str) -> dict:
+    """A basis spec with the friction direction ``old`` replaced by the state column ``new_var`` (inside products
+    too). ``old``: a pre-sliding state spec (its column is swapped) or a tanh width (float): then every
+    tanh(omega_m / eps) becomes the state and a Stribeck excess exp(-(|omega_m|/omega_s)^delta) tanh(omega_m / eps)
+    rides on it, as the library builds its candidates on a state baseline (``library.friction_candidates``)."""
     if b.get("op") == "prod":
-        return {**b, "factors": [_swap_state(f, old_var, new_var) for f in b["factors"]]}
-    if b.get("var") == old_var:
-        return {**b, "var": new_var}
+        return {**b, "factors": [_swap_state(f, old, new_var) for f in b["factors"]]}
+    if isinstance(old, dict):
+        return {**b, "var": new_var} if b.get("var") == old["var"] else b
+    if b.get("var") == "omega_m" and b.get("op") == "sgn":
+        return {"op": "var", "var": new_var}
+    if b.get("var") == "omega_m" and b.get("op") == "stribeck":
+        return {"op": "prod", "factors": [{"op": "exp_decay", "var": "omega_m", "v_s": float(b["v_s"]),
+                                           "delta": float(b.get("delta", 1.0))}, {"op": "var", "var": new_var}]}
     return b
 
 
 def _reidentify_presliding(sig, t_full, segment_full, window_s, target, srows, block, cols_of, keep, groups, sel,
-                           spec0: dict, d0: float, d_range) -> tuple | None:
+                           spec0, d0: float, d_range, *, X_sel: np.ndarray | None = None,
+                           min_gain: float = 0.0) -> tuple | None:
     """The pre-sliding distance and timing identified again given the selected groups (filtered CV profile +
     jackknife, :func:`identify_presliding_filtered`), as the tanh width is (:func:`_reidentify_width`).
 
     The first profile had the undeclared effects in its residual (e.g. a Stribeck rise, whose friction level near
     zero speed sets LuGre's transition length g(omega) / sigma0); the selected groups' columns on the state follow
     the distance under search, and groups that replace a baseline column (Stribeck replaces T_C s) stand in for it.
-    Returns (d, shift, d_sd, note, spec0) when d is identified and differs from ``d0`` by more than its SD, else
-    None."""
-    old_var = spec0["var"]
+    ``spec0``: the baseline's friction direction, the state (dict) or tanh's width (float: the baseline kept tanh
+    because the first profile did not identify d or did not gain enough; the selected groups' tanh columns then
+    follow the state, :func:`_swap_state`). Returns (d, shift, d_sd, note, spec0, fit) when d is identified and,
+    for a state, differs from ``d0`` by more than its SD; for tanh, when the selected model on the state lowers
+    the CV error of the selected model on tanh (``X_sel``, its columns on the shape rows ``srows``) by
+    ``min_gain`` (the baseline's rule for the same choice); else None."""
     replaced = {j for gi in sel for j in getattr(groups[gi][0], "replace_idx", ())}
     kb = [j for j in range(len(keep)) if j not in replaced]
     cols = [cols_of(spec0)[keep[j]] for j in kb]
@@ -895,12 +907,30 @@ def _reidentify_presliding(sig, t_full, segment_full, window_s, target, srows, b
 
     def matrix_of(spec, table):
         Xb = _baseline_matrix(cols_of(spec), table)[:, keep][:, kb]
-        Xg = [basis_matrix([_swap_state(b, old_var, spec["var"]) for b in groups[gi][0].basis], table) for gi in sel]
+        Xg = [basis_matrix([_swap_state(b, spec0, spec["var"]) for b in groups[gi][0].basis], table) for gi in sel]
         return np.column_stack([Xb] + Xg)
     f, sh, note = identify_presliding_filtered(sig, t_full, segment_full, window_s, target, srows, block, matrix_of,
                                                names, deriv, d_range)
     d1, sd1 = float(f.shape["d"]), float(f.shape_sd["d"])
-    if not f.identified["d"] or not np.isfinite(sd1) or abs(d1 - d0) <= sd1:
+    if not f.identified["d"] or not np.isfinite(sd1):
+        return None
+    if not isinstance(spec0, dict):
+        # the law is chosen by the raw columns' CV error (same rows and blocks), as the baseline chooses it
+        s_rows = _take(sig, srows)
+        y_s = sig[target][srows]
+        spec = {"op": "var", "var": shifted_state_var("theta_m", d1, sh)}
+        cv_state = fit_separable(y_s, lambda _: matrix_of(spec, s_rows), names, block, [], jackknife=False).cv_rmse
+        cv_tanh = fit_separable(y_s, lambda _: X_sel, names, block, [], jackknife=False).cv_rmse
+        gain = 1.0 - (cv_state / cv_tanh) ** 2 if cv_tanh > 0 else 0.0
+        if not gain >= min_gain:
+            return None
+        note = (f"friction transition identified again given the selected effects: a rate-independent pre-sliding "
+                f"state (Dahl / LuGre bristle state) of theta_m with d = {d1:.3g} +- {sd1:.2g} rad (CV profile over "
+                f"{d_range[0]:.3g}..{d_range[1]:.3g} rad, block jackknife{note}) lowers the cross-validated error of "
+                f"the selected model by {gain:.1%} against tanh(omega_m / eps) (the first profile had the undeclared "
+                "effects in its residual); used in the baseline instead of tanh, candidates and selection redone with it")
+        return d1, sh, sd1, note, float(spec0), f
+    if abs(d1 - d0) <= sd1:
         return None
     note = (f"pre-sliding distance identified again given the selected effects: d {d0:.3g} -> {d1:.3g} +- {sd1:.2g} "
             f"rad (CV profile over the same range, block jackknife{note}; the first estimate had the undeclared "
@@ -1263,6 +1293,23 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                                      lambda spec: baseline_columns(target, avail, declared, extra_terms, spec,
                                                                    twin_params)[0],
                                      keep, groups, sel, fric, float(ps_fit.shape["d"]), (d_lo, d_hi))
+        if rep is not None:
+            return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
+                                   twin_params=twin_params, opt=opt, presliding=rep)
+    if (presliding is None and eps_fit is not None and not isinstance(fric, dict) and d_hi > d_lo and sel
+            and opt.presliding_fit == "filtered"):
+        # the baseline kept tanh, its pre-sliding profile made with the undeclared effects in the residual (a
+        # Stribeck rise near zero speed can pull d onto its lower bound): the law is chosen again given the
+        # selected groups, by the same rule (d identified, CV gain >= min_gain), and if the state wins the
+        # candidates are built on it and selected again
+        rep = _reidentify_presliding(sig, ds0.t, ds0.segment, alpha_win, target, srows, ds.block[srows],
+                                     lambda spec: baseline_columns(target, avail, declared, extra_terms, spec,
+                                                                   twin_params)[0],
+                                     keep, groups, sel,
+                                     float(transition_width[3]) if transition_width is not None
+                                     and len(transition_width) > 3 else float(sgn_eps),
+                                     float("nan"), (d_lo, d_hi),
+                                     X_sel=X_all[srows][:, _model(base_idx, groups, sel)], min_gain=opt.min_gain)
         if rep is not None:
             return discover_signal(ds0, target, heldout0, declared=declared, extra_terms=extra_terms,
                                    twin_params=twin_params, opt=opt, presliding=rep)

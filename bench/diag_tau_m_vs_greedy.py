@@ -1,0 +1,177 @@
+"""Diagnosis of a tau_m case where ``hdphm bench discover``'s greedy reference scores lower on the held-out bag.
+
+Rebuilds both final models on the same rows (the signals discover reads: its speed timing and acceleration choice,
+standstill rows out) and scores each, and swaps between them, two ways: the held-out bag's RMSE (what the bench
+judges) and the leave-one-block-out CV error of the fit blocks (what discover may choose on). A group that lowers
+the held-out error but not the fit blocks' CV error is the held-out bag's own; a group or shape that lowers both
+is one the fit data support and discover missed. Diagnosis only: nothing here feeds an estimator.
+
+    python bench/diag_tau_m_vs_greedy.py CASE_DIR [REPORT_JSON]
+
+CASE_DIR holds ``bags/*.mcap`` (the last bag held out, as the bench); REPORT_JSON is discover's report on them
+(default CASE_DIR/discovery/report.json).
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def main(argv: list[str] | None = None) -> int:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_discover as B
+    from hd_bag import read_mission
+    from hd_ground.discovery.core import Options, chunked_paired_z, choose_alpha_window, choose_speed_timing, standstill_rows
+    from hd_ground.discovery.data import dataset_from_missions
+    from hd_ground.discovery.greedy import _groups
+    from hd_twin.identify import BlockGram, presliding_state
+    from hd_twin.terms import basis_matrix
+
+    args = argv if argv is not None else sys.argv[1:]
+    case = Path(args[0])
+    rep = json.loads(Path(args[1] if len(args) > 1 else case / "discovery" / "report.json").read_text())
+    bags = sorted(glob.glob(str(case / "bags" / "*.mcap")))
+    ms = [read_mission(b) for b in bags]
+    ds = dataset_from_missions(ms, bags)
+    ho = ds.bag == len(bags) - 1
+    if ds.speed_lags:
+        ds = choose_speed_timing(dataset_from_missions(ms, bags, retime_speeds=False), ds, ho)[0]
+    ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
+        ms, bags, retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho, mode=B.ALPHA_WINDOW)[0]
+    still = standstill_rows(ds, Options().standstill_sigmas)[0]
+    keep = ~still
+    sig = {k: v[keep] for k, v in ds.signals.items()}
+    hok, blk = ho[keep], ds.block[keep]
+    fit = ~hok
+    y, w = sig["tau_m"], sig["omega_m"]
+    avail = {k for k, v in sig.items() if np.std(v) > 0}
+    nfb = len(np.unique(blk[fit]))
+    print(f"rows: fit {fit.sum()} in {nfb} blocks, held-out {hok.sum()}; acceleration window {getattr(ds, 'alpha_window', '?')}")
+
+    def lsq(X, yy):
+        s = np.sqrt(np.mean(X**2, 0)) + 1e-300
+        return np.linalg.lstsq(X / s, yy, rcond=None)[0] / s
+
+    def score(cols):
+        X = np.column_stack(cols)
+        b = lsq(X[fit], y[fit])
+        r = (y - X @ b)[hok]
+        cv = BlockGram(X[fit], y[fit], blk[fit]).cv_sse()
+        return r, cv
+
+    rows: dict[str, tuple] = {}
+
+    def report(name, cols, ref=None):
+        r, cv = score(cols)
+        rows[name] = (r, cv)
+        s = f"{name:58s} held-out {np.sqrt(np.mean(r**2)):.5f}  CV {np.sqrt(cv.sum() / fit.sum()):.5f}"
+        if ref is not None:
+            r0, cv0 = rows[ref]
+            d = cv0 - cv
+            s += (f"  vs [{ref}]: CV SSE {(cv.sum() - cv0.sum()) / cv0.sum() * 100:+.2f}% (better in {np.mean(d > 0) * 100:.0f}%"
+                  f" of blocks, t {d.mean() / (d.std(ddof=1) / np.sqrt(len(d))):+.2f}), held-out paired z "
+                  f"{chunked_paired_z(r**2 - r0**2, 20):+.2f}")
+        print(s)
+        return r, cv
+
+    s0 = rep["signals"][0] if rep["signals"][0]["signal"] == "tau_m" else next(
+        x for x in rep["signals"] if x["signal"] == "tau_m")
+    bp = s0["baseline_parameters"]
+    # discover: baseline inertia/timing/load path/viscous + its friction direction + its terms
+    dbase = [sig["alpha_m"]] + ([sig["alpha_m_dot"]] if "alpha_m_dot" in avail else []) + (
+        [sig["Q_red_over_N"]] if "Q_red_over_N" in avail else []) + [w]
+    eps_d = float(bp.get("eps_omega", 0.0))
+    print(f"discover baseline eps {eps_d:.4g}; terms: " + "; ".join(
+        f"{t['name']}({t['variable']}) {json.dumps({k: round(v, 4) for k, v in t['parameters'].items() if not k.endswith(('_sd', '_se', '_weak'))})}"
+        for t in s0["terms"]))
+    replaces_tc = any(t["name"] == "stribeck_friction" for t in s0["terms"])
+    tcols = [basis_matrix(t["basis"], sig)[:, j] for t in s0["terms"] for j in range(len(t["basis"]))]
+    report("discover baseline (tanh eps_d)", dbase + [np.tanh(w / eps_d) if eps_d > 0 else np.sign(w)])
+    D = "discover final"
+    report(D, dbase + ([] if replaces_tc else [np.tanh(w / eps_d) if eps_d > 0 else np.sign(w)]) + tcols,
+           "discover baseline (tanh eps_d)")
+
+    # greedy, replayed with its trace (the same code path as greedy.greedy_discover)
+    scale = float(np.quantile(np.abs(w[fit]), 0.9))
+    best = None
+    for eps in np.geomspace(1e-3, 0.3, 8) * scale:
+        X = np.column_stack(dbase + [np.tanh(w / eps)])
+        r = y[fit] - X[fit] @ lsq(X[fit], y[fit])
+        if best is None or r @ r < best[0]:
+            best = (float(r @ r), eps)
+    eps_g = best[1]
+    gbase = dbase + [np.tanh(w / eps_g)]
+    groups = _groups(sig, "tau_m", eps_g, avail)
+    G0 = f"greedy baseline (tanh eps_g {eps_g:.3g})"
+    report(G0, gbase, D)
+    cols, used, prev = list(gbase), set(), G0
+    cur = float(np.sum(rows[G0][0] ** 2))
+    chosen = []
+    while len(chosen) < 6:
+        trial = []
+        for i, g in enumerate(groups):
+            if i in used:
+                continue
+            r, _ = score(cols + g[3])
+            trial.append((float(r @ r), i))
+        e, i = min(trial)
+        if (cur - e) / cur < 0.02:
+            break
+        used.add(i)
+        chosen.append(i)
+        cols = cols + groups[i][3]
+        name = f"greedy + {groups[i][0]}({groups[i][1]}, {groups[i][2]})"
+        if groups[i][0] == "stribeck_friction":
+            name += f" ws#{i}"
+        report(name, cols, prev)
+        prev, cur = name, e
+    G = prev
+
+    # swaps: each greedy group on top of discover's model, and discover's terms on greedy's baseline
+    print("-- greedy's groups added to discover's model, one at a time:")
+    dcols = dbase + ([] if replaces_tc else [np.tanh(w / eps_d) if eps_d > 0 else np.sign(w)]) + tcols
+    groups_d = _groups(sig, "tau_m", eps_d, avail) if eps_d > 0 else groups  # on discover's friction direction
+    for i in chosen:
+        g = groups[i]
+        report(f"discover + {g[0]}({g[1]}, {g[2]}) #{i}", dcols + g[3], D)
+        if groups_d is not groups and g[3] is not groups_d[i][3]:
+            report(f"discover + {g[0]}({g[1]}, {g[2]}) #{i} at eps_d", dcols + groups_d[i][3], D)
+    print("-- every greedy group on discover's model (CV of the fit blocks; the top few by CV):")
+    res = []
+    for i, g in enumerate(groups):
+        r, cv = score(dcols + g[3])
+        res.append((cv.sum(), np.sqrt(np.mean(r**2)), i))
+    for cvs, hr, i in sorted(res)[:6]:
+        g = groups[i]
+        print(f"   {g[0]}({g[1]}, {g[2]}) #{i}: CV SSE {(cvs - rows[D][1].sum()) / rows[D][1].sum() * 100:+.2f}%, "
+              f"held-out {hr:.5f}")
+    report("greedy baseline + discover's terms", gbase + tcols, G)
+    # the friction direction as a pre-sliding state (rate-independent transition) on discover's model
+    print("-- discover's model with a pre-sliding state s(theta_m; d) as the friction direction:")
+    for t in s0["terms"]:
+        if t["name"] != "stribeck_friction":
+            continue
+        bb = {b["op"]: b for b in t["basis"]}
+        vs, de = bb["stribeck"]["v_s"], bb["stribeck"]["delta"]
+        for d in np.geomspace(2e-4, 2e-2, 7):
+            z = presliding_state(ds.signals["theta_m"], d, ds.segment)[keep]
+            report(f"  d {d:.2e}: s, exp(-(|w|/{vs:.3g})^{de:.3g}) s", dbase + [z, np.exp(-(np.abs(w) / vs) ** de) * z], D)
+    # per-block CV of both final models
+    cvD, cvG = rows[D][1], rows[G][1]
+    print("per fit block CV SSE, discover | greedy | bag:")
+    ub = np.unique(blk[fit])
+    for j, b in enumerate(ub):
+        print(f"   block {b:3d} bag {int(ds.bag[keep][blk == b][0])}: {cvD[j]:10.3f} {cvG[j]:10.3f}")
+    rD, rG = rows[D][0], rows[G][0]
+    print(f"held-out discover {np.sqrt(np.mean(rD**2)):.5f} greedy {np.sqrt(np.mean(rG**2)):.5f} paired z "
+          f"{chunked_paired_z(rD**2 - rG**2, 20):+.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
