@@ -657,20 +657,28 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
                 gw, fw, tw, why = 0.0, 0.0, float("-inf"), ["its position does not move within any block"]
             rec.update(within_gain=float(gw), within_folds=fw, within_t=tw, within_blocks=int(info.sum()))
             if why and info.any():
-                # the CV sum can be dominated by one block the group predicts badly for another reason (seen: a
-                # ripple out of phase in the fastest block, in the pooled CV too); the levels' question proper is
-                # whether they pull the group's coefficients: admitted if its within-block (fixed-effects)
-                # coefficients are identified and agree with the pooled ones (Hausman), both by the Wald rule
+                # the CV sums can be dominated by one block the group predicts badly for another reason (seen: a
+                # ripple out of phase in the fastest block, in the pooled CV as well), so the same questions are
+                # asked block-robustly: the median block's relative gain reaches min_gain, and the group's
+                # within-block (fixed-effects) coefficients are identified and agree with the pooled ones (the
+                # levels' question proper: do they pull the coefficients? Hausman), both by the Wald rule
                 ww, hz, k = within_block_coefficients(gram, cur_idx, _model(base_idx, groups, selected + [gi]), *car)
                 thr = _wald_threshold(k, opt.wald_sigmas) if k else float("inf")
-                rec.update(within_wald=ww, hausman=hz, within_threshold=thr)
-                if ww >= thr and hz < thr:
-                    rec["within_note"] = "; ".join(why) + " (CV); coefficients identified within blocks and equal to " \
-                        "the pooled ones"
-                    why = []
+                gm = float(np.median(1.0 - ew[info] / np.maximum(cw[info], 1e-300)))
+                rec.update(within_median_gain=gm, within_wald=ww, hausman=hz, within_threshold=thr)
+                robust = []
+                if gm < opt.min_gain:
+                    robust.append(f"median block gain < {opt.min_gain:.0%}")
+                if ww < thr:
+                    robust.append("within-block coefficients not identified")
+                elif hz >= thr:
+                    robust.append("pooled coefficients differ from the within-block ones (Hausman)")
+                if robust:
+                    why = why + robust
                 else:
-                    why = why + [("within-block coefficients not identified" if ww < thr else
-                                  "pooled coefficients differ from the within-block ones (Hausman)")]
+                    rec["within_note"] = "; ".join(why) + " (CV sums); median block gain, within-block coefficients " \
+                        "identified and equal to the pooled ones"
+                    why = []
             if why:
                 # its CV gain is a level per block (blocks at different positions, the position still or drifting
                 # slowly within them), not a function of the position: not admitted at this step
