@@ -21,7 +21,9 @@ plots and the report). Steps, for one measured target signal:
    leave-one-block-out jackknife Wald statistic reaches the 3-sigma chi^2
    quantile); a group that is a function of a position (``Candidate.level_carrier``) must also gain with a
    level of its factor per block free, over the blocks where the position moves (``within_block_sse``), not only
-   by levels between blocks; a backward pass drops groups that became redundant or lost
+   by levels between blocks (or, where those CV sums fail, block-robustly: the median block gains ``min_gain``
+   and its within-block coefficients are identified and equal to the pooled ones, ``within_block_coefficients``,
+   a Hausman test); a backward pass drops groups that became redundant or lost
    identification. Alternatives of one family compete; one survives. A shaped group that is not identified
    in the final model closes its family and the selection is made again; the friction transition width is
    identified again given the selected groups, and when it moves beyond its SD, candidates and selection are
@@ -593,8 +595,12 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
     ``carrier(gi)`` (the group's ``Candidate.level_carrier`` on the fit rows, or None): a group with a carrier, a
     function of a position, must also reach ``opt.min_gain`` and one paired standard error with a level of its
     carrier per block free in both models (:func:`within_block_sse`; the fold count is judged once, on the pooled
-    CV), over the blocks where its position moves; one that gains only by levels between blocks
-    is rejected at this step ("reject (between-block levels)") and competes again once the model has changed.
+    CV), over the blocks where its position moves. Where those sums fail, the check is asked block-robustly (a sum
+    that one block of large error dominates, e.g. a ripple out of phase in the fastest block, in the pooled CV as
+    well): the median block's relative gain reaches ``opt.min_gain`` and the group's coefficients with the levels
+    free are identified and equal to the pooled ones (:func:`within_block_coefficients`, the Wald rule for both).
+    One that gains only by levels between blocks is rejected at this step ("reject (between-block levels)") and
+    competes again once the model has changed.
     """
     cur_idx = list(base_idx)
     cur = gram.cv_sse(cur_idx)
