@@ -60,7 +60,8 @@ def main(argv=None) -> int:
             c, e = cw[info], ew[info]
             print(f"  pooled gain {1 - pe.sum() / pc.sum():+.3f} t {core._paired_t(pc, pe):+.2f} | within gain "
                   f"{1 - e.sum() / max(c.sum(), 1e-300):+.3f} t {core._paired_t(c, e):+.2f} median "
-                  f"{np.median(1 - e / np.maximum(c, 1e-300)):+.3f} | Wald {ww:.1f} Hausman {hz:.2f} (threshold {thr:.1f})")
+                  f"{np.median(1 - e / np.maximum(c, 1e-300)):+.3f} | Wald {ww:.1f} Hausman {hz:.2f} "
+                  f"(threshold {thr:.1f})")
         return cw, ew, info
 
     core.select_groups, core.within_block_sse = sel, wb

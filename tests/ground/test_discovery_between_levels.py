@@ -151,7 +151,8 @@ def test_a_true_ripple_lost_in_one_fast_block_is_admitted_by_its_within_block_co
         car = (np.ones(len(y)), np.zeros(len(y), bool))
         sel, trace = select_groups(gram, [0, 1], groups, opt, carrier=lambda gi: car)
         rec = trace[1]
-        assert rec["gain"] >= opt.min_gain and rec["folds_better"] >= opt.fold_majority, rec  # the pooled rules admit it
+        # the pooled rules admit it
+        assert rec["gain"] >= opt.min_gain and rec["folds_better"] >= opt.fold_majority, rec
         if rec["within_gain"] < opt.min_gain or rec["within_t"] < 1.0:
             cv_rejects += 1
             assert "hausman" in rec, rec
