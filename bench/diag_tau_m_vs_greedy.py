@@ -26,9 +26,11 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_discover as B
     from hd_bag import read_mission
-    from hd_ground.discovery.core import Options, chunked_paired_z, choose_alpha_window, choose_speed_timing, standstill_rows
+    from hd_ground.discovery.core import (Options, StateSignals, chunked_paired_z, choose_alpha_window,
+                                          choose_speed_timing, standstill_rows)
     from hd_ground.discovery.data import dataset_from_missions
     from hd_ground.discovery.greedy import _groups
+    from hd_ground.discovery.prefilter import shifted_state_var
     from hd_twin.identify import BlockGram, presliding_state
     from hd_twin.terms import basis_matrix
 
@@ -46,12 +48,15 @@ def main(argv: list[str] | None = None) -> int:
     still = standstill_rows(ds, Options().standstill_sigmas)[0]
     keep = ~still
     sig = {k: v[keep] for k, v in ds.signals.items()}
+    # discover's terms may read a pre-sliding state column (computed on the full time series, then cut)
+    ssig = StateSignals(ds.signals, (ds.signals, ds.segment, {}), np.arange(ds.n)).rows_of(keep)
     hok, blk = ho[keep], ds.block[keep]
     fit = ~hok
     y, w = sig["tau_m"], sig["omega_m"]
     avail = {k for k, v in sig.items() if np.std(v) > 0}
     nfb = len(np.unique(blk[fit]))
-    print(f"rows: fit {fit.sum()} in {nfb} blocks, held-out {hok.sum()}; acceleration window {getattr(ds, 'alpha_window', '?')}")
+    print(f"rows: fit {fit.sum()} in {nfb} blocks, held-out {hok.sum()}; acceleration window "
+          f"{getattr(ds, 'alpha_window', '?')}")
 
     def lsq(X, yy):
         s = np.sqrt(np.mean(X**2, 0)) + 1e-300
@@ -73,8 +78,9 @@ def main(argv: list[str] | None = None) -> int:
         if ref is not None:
             r0, cv0 = rows[ref]
             d = cv0 - cv
-            s += (f"  vs [{ref}]: CV SSE {(cv.sum() - cv0.sum()) / cv0.sum() * 100:+.2f}% (better in {np.mean(d > 0) * 100:.0f}%"
-                  f" of blocks, t {d.mean() / (d.std(ddof=1) / np.sqrt(len(d))):+.2f}), held-out paired z "
+            t = d.mean() / (d.std(ddof=1) / np.sqrt(len(d))) if np.std(d) > 0 else 0.0
+            s += (f"  vs [{ref}]: CV SSE {(cv.sum() - cv0.sum()) / cv0.sum() * 100:+.2f}% (better in "
+                  f"{np.mean(d > 0) * 100:.0f}% of blocks, t {t:+.2f}), held-out paired z "
                   f"{chunked_paired_z(r**2 - r0**2, 20):+.2f}")
         print(s)
         return r, cv
@@ -86,15 +92,22 @@ def main(argv: list[str] | None = None) -> int:
     dbase = [sig["alpha_m"]] + ([sig["alpha_m_dot"]] if "alpha_m_dot" in avail else []) + (
         [sig["Q_red_over_N"]] if "Q_red_over_N" in avail else []) + [w]
     eps_d = float(bp.get("eps_omega", 0.0))
-    print(f"discover baseline eps {eps_d:.4g}; terms: " + "; ".join(
-        f"{t['name']}({t['variable']}) {json.dumps({k: round(v, 4) for k, v in t['parameters'].items() if not k.endswith(('_sd', '_se', '_weak'))})}"
-        for t in s0["terms"]))
+    if "presliding_distance" in bp:  # discover's baseline friction direction is a pre-sliding state
+        d_ps, sh_ps = bp["presliding_distance"], bp.get("presliding_timing_samples", 0.0)
+        fdir = ssig[shifted_state_var("theta_m", d_ps, sh_ps)]
+        print(f"discover baseline: pre-sliding state d {d_ps:.4g} rad, timing {sh_ps:+.2f} samples")
+    else:
+        fdir = np.tanh(w / eps_d) if eps_d > 0 else np.sign(w)
+        print(f"discover baseline: tanh, eps {eps_d:.4g} rad/s")
+    for t in s0["terms"]:
+        par = {k: round(v, 4) for k, v in t["parameters"].items() if not k.endswith(("_sd", "_se", "_weak"))}
+        print(f"discover term: {t['name']}({t['variable']}) {json.dumps(par)}")
     replaces_tc = any(t["name"] == "stribeck_friction" for t in s0["terms"])
-    tcols = [basis_matrix(t["basis"], sig)[:, j] for t in s0["terms"] for j in range(len(t["basis"]))]
-    report("discover baseline (tanh eps_d)", dbase + [np.tanh(w / eps_d) if eps_d > 0 else np.sign(w)])
+    tcols = [basis_matrix(t["basis"], ssig)[:, j] for t in s0["terms"] for j in range(len(t["basis"]))]
+    B0 = "discover baseline"
+    report(B0, dbase + [fdir])
     D = "discover final"
-    report(D, dbase + ([] if replaces_tc else [np.tanh(w / eps_d) if eps_d > 0 else np.sign(w)]) + tcols,
-           "discover baseline (tanh eps_d)")
+    report(D, dbase + ([] if replaces_tc else [fdir]) + tcols, B0)
 
     # greedy, replayed with its trace (the same code path as greedy.greedy_discover)
     scale = float(np.quantile(np.abs(w[fit]), 0.9))
@@ -134,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # swaps: each greedy group on top of discover's model, and discover's terms on greedy's baseline
     print("-- greedy's groups added to discover's model, one at a time:")
-    dcols = dbase + ([] if replaces_tc else [np.tanh(w / eps_d) if eps_d > 0 else np.sign(w)]) + tcols
+    dcols = dbase + ([] if replaces_tc else [fdir]) + tcols
     groups_d = _groups(sig, "tau_m", eps_d, avail) if eps_d > 0 else groups  # on discover's friction direction
     for i in chosen:
         g = groups[i]
@@ -154,13 +167,14 @@ def main(argv: list[str] | None = None) -> int:
     # the friction direction as a pre-sliding state (rate-independent transition) on discover's model
     print("-- discover's model with a pre-sliding state s(theta_m; d) as the friction direction:")
     for t in s0["terms"]:
-        if t["name"] != "stribeck_friction":
-            continue
         bb = {b["op"]: b for b in t["basis"]}
+        if t["name"] != "stribeck_friction" or "stribeck" not in bb:
+            continue  # only a Stribeck term on tanh is moved onto the state here
         vs, de = bb["stribeck"]["v_s"], bb["stribeck"]["delta"]
         for d in np.geomspace(2e-4, 2e-2, 7):
             z = presliding_state(ds.signals["theta_m"], d, ds.segment)[keep]
-            report(f"  d {d:.2e}: s, exp(-(|w|/{vs:.3g})^{de:.3g}) s", dbase + [z, np.exp(-(np.abs(w) / vs) ** de) * z], D)
+            report(f"  d {d:.2e}: s, exp(-(|w|/{vs:.3g})^{de:.3g}) s",
+                   dbase + [z, np.exp(-(np.abs(w) / vs) ** de) * z], D)
     # per-block CV of both final models
     cvD, cvG = rows[D][1], rows[G][1]
     print("per fit block CV SSE, discover | greedy | bag:")

@@ -146,7 +146,9 @@ def test_presliding_state_chosen_again_when_the_first_profile_kept_tanh(monkeypa
     import hd_ground.discovery.core as core
 
     first = core._reidentify_presliding
-    monkeypatch.setattr(core, "_reidentify_presliding", lambda *a, **k: first(*a, **k) if isinstance(a[11], dict) else None)
+    # a[11]: the baseline's friction direction (a state spec, or tanh's width)
+    monkeypatch.setattr(core, "_reidentify_presliding",
+                        lambda *a, **k: first(*a, **k) if isinstance(a[11], dict) else None)
     old = discover_signal(ds, "tau_m", ho)
     assert any("does not improve on tanh" in s and "not identified" in s for s in old.statements), old.statements
     assert "presliding_distance" not in old.baseline_params
