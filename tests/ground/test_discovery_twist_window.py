@@ -6,12 +6,15 @@ CV identifies a smoother, that it lowers the held-out error of the true law fitt
 output encoder fine enough it leaves the twist as logged. And (thirteenth pass) that the grid is extended while its
 CV optimum sits on the longest window: at 4 kHz with slow output motion the quantisation error is best averaged over
 more than 33 samples; with the fixed grid (5..33) the optimum is only bounded and the twist stays as logged, with the
-grid extended by doubling the CV error turns up inside the grid and the window is identified. A few seconds."""
+grid extended by doubling the CV error turns up inside the grid and the window is identified. And (nineteenth
+pass, core.confirm_twist_window) that the smoother is kept only when the model finally selected on the smoothed twist
+is identified against the one selected on the logged twist: a smoother that helps the logged twist's model but whose
+rediscovery loses a term (here the cubic) leaves the twist as logged. A few seconds."""
 
 import numpy as np
 import pytest
 
-from hd_ground.discovery.core import Options, _lstsq, choose_twist_window
+from hd_ground.discovery.core import Options, _lstsq, choose_twist_window, confirm_twist_window
 from hd_ground.discovery.data import Dataset, with_smoothed_twist
 
 N, K, K3 = 100.0, 5.5e5, 1.0e11
@@ -109,3 +112,26 @@ def test_bounded_optimum_extends_the_grid_until_the_cv_error_turns_up():
     d33 = with_smoothed_twist(ds, 33)
     assert err(out) < 0.8 * err(d33) < 0.8 * err(ds)
     assert _heldout_rmse_true_law(out, ho, cubic=False) < 0.8 * _heldout_rmse_true_law(d33, ho, cubic=False)
+
+
+#: the cubic term of the torsion law as a discovery returns it (basis on the twist, coefficient k3)
+CUBIC = {"name": "nonlinear_stiffness", "basis": [{"op": "pow", "var": "windup", "p": 3}]}
+
+
+def test_smoother_kept_only_when_the_final_model_on_it_wins():
+    ds, _ = _dataset(2 * np.pi / 2**16)
+    ho = ds.bag == 3
+    # the smoother is identified with the model selected on the logged twist (the cubic law) ...
+    sm, note = choose_twist_window(ds, ho, Options(), terms=[CUBIC])
+    assert sm is not ds and "identified on the fit bags" in note, note
+    # ... and holds when the rediscovery on it selects that model again
+    keep, why = confirm_twist_window(ds, sm, ho, Options(), terms_logged=[CUBIC], terms_smoothed=[CUBIC])
+    assert keep and why.endswith("kept"), why
+    # a rediscovery that loses the cubic (e.g. a shape that fails its jackknife on the smoothed twist): the final
+    # model on the smoothed twist is worse than the logged twist's on the fit blocks, so the twist stays as logged
+    keep, why = confirm_twist_window(ds, sm, ho, Options(), terms_logged=[CUBIC], terms_smoothed=[])
+    assert not keep and why.startswith("twist: as logged after all"), why
+    assert "gain < 2%" in why and "the plain baseline on the twist smoothed" in why, why
+    # the reverse (the logged twist's model lacks the cubic, the smoothed twist's has it): the smoother stays
+    keep, why = confirm_twist_window(ds, sm, ho, Options(), terms_logged=[], terms_smoothed=[CUBIC])
+    assert keep, why

@@ -1920,3 +1920,36 @@ def choose_twist_window(ds: Dataset, heldout: np.ndarray, opt: Options | None = 
         return d2, (f"twist: theta_f smoothed (quadratic Savitzky-Golay, {w} samples) before the twist "
                     f"theta_m / N - theta_f, identified on the fit bags ({stats}); used for Q_red")
     return ds, f"twist: as logged (best smoothing {w} samples: {'; '.join(why)}; {stats})"
+
+
+def confirm_twist_window(ds_logged: Dataset, ds_smoothed: Dataset, heldout: np.ndarray, opt: Options | None = None,
+                         terms_logged: list[dict] | None = None, terms_smoothed: list[dict] | None = None,
+                         declared: list[str] | None = None, extra_terms: list[dict] | None = None
+                         ) -> tuple[bool, str]:
+    """Whether the smoothed twist still wins with the model finally selected on it (issue 10, nineteenth pass).
+
+    :func:`choose_twist_window` judges a smoother with the model selected on the logged twist; the Q_red discovery
+    is then made again on the smoothed twist and may select another model (a nonlinear shape that was identified
+    on the logged twist can fail its jackknife there, and the groups that needed it are then not found). The two
+    *final* models are compared on the fit bags by the same rule: each refitted on its own twist
+    (:func:`twist_model_cv_folds`: the same Q_red rows and blocks, only the regressors differ), the smoothed
+    twist's model must be identified against the logged twist's one (:func:`_identified_against`: CV mean
+    squared error lower by ``opt.min_gain``, in at least ``opt.fold_majority`` of the blocks, at least one paired
+    standard error). Returns (keep the smoothed twist, a statement). When either CV error cannot be formed the
+    smoothed twist is kept (the first choice stands)."""
+    opt = opt or Options()
+    a = twist_model_cv_folds(ds_logged, heldout, terms_logged, declared, extra_terms)
+    b = twist_model_cv_folds(ds_smoothed, heldout, terms_smoothed, declared, extra_terms)
+    if a is None or b is None or len(a[0]) != len(b[0]):
+        return True, ""
+
+    def names(terms):
+        return ", ".join(t["name"] for t in terms or []) or "the plain baseline"
+    gain, fb, t_pair, why = _identified_against(a[0], b[0], opt)
+    stats = (f"CV RMSE on the fit bags: {names(terms_logged)} on the logged twist {a[1]:.4g} N*m, "
+             f"{names(terms_smoothed)} on the twist smoothed over {int(ds_smoothed.twist_window)} samples "
+             f"{b[1]:.4g} N*m, {gain:+.1%}, better in {fb:.0%} of the blocks, {t_pair:.1f} paired SE")
+    if not why:
+        return True, f"twist: the smoothed twist's final model is identified against the logged twist's ({stats}); kept"
+    return False, (f"twist: as logged after all: the model selected on the smoothed twist is not identified against "
+                   f"the one selected on the logged twist ({'; '.join(why)}; {stats})")

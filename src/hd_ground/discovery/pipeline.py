@@ -20,7 +20,8 @@ from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
 from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing,
-                   choose_twist_window, discover_signal, split_fit_heldout, static_term)
+                   choose_twist_window, confirm_twist_window, discover_signal, split_fit_heldout,
+                   static_term)
 from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions, with_smoothed_twist
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
@@ -152,8 +153,18 @@ def run_discovery(
                 ds.notes.append(st_)
                 log(f"note: {st_}")
             if ds_q is not ds:
-                res = discover_signal(ds_q, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
-                twist_window = int(ds_q.twist_window)
+                res_s = discover_signal(ds_q, target, ho, declared=decl, extra_terms=extra, twin_params=tparams,
+                                        opt=opt)
+                # the smoother must hold for the model finally selected on it too: the two final models compared
+                # on the fit bags by the same rule (core.confirm_twist_window); otherwise the logged twist stays
+                keep, st_ = confirm_twist_window(ds, ds_q, ho, opt, terms_logged=res.terms, terms_smoothed=res_s.terms,
+                                                 declared=decl, extra_terms=extra)
+                if st_:
+                    ds.notes.append(st_)
+                    log(f"note: {st_}")
+                if keep:
+                    res = res_s
+                    twist_window = int(ds_q.twist_window)
         results.append(res)
         if results_out is not None:
             results_out.append(res)
