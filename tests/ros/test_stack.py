@@ -131,7 +131,13 @@ def test_missing_topic_nan_dropout_disorder_twin_update_restart(bags, domain_id)
                            in {(s.name, s.level) for s in seen}, 10.0)  # STALE: topic missing
         # joint states stop -> STALE after the timeout
         assert _pump_until(st, lambda: any(s.name == "hdphm/onboard/fault" and s.level == bytes([3]) for s in seen), 10.0)
-        hw = {s.hardware_id for s in seen if s.name.startswith("hdphm/onboard")}
-        assert hw == {"EMA-T1"}
+        onboard = [s for s in seen if s.name.startswith("hdphm/onboard")]
+        assert {s.hardware_id for s in onboard} <= {"EMA-T1", "unknown"}
+        assert onboard[-1].hardware_id == "EMA-T1"
+        # a restarted node that waited longer than stale_timeout_s (wall) for its first sample (a loaded machine)
+        # reports under "unknown" until the mission names it (hd_onboard.publishing.PublishSchedule.may_report);
+        # never a raised flag under that name
+        assert all(s.level in (bytes([0]), bytes([3])) for s in onboard
+                   if s.hardware_id == "unknown" and s.name == "hdphm/onboard/fault")
     finally:
         st.close()
