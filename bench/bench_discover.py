@@ -16,7 +16,12 @@ imports this module for its cases and checks.
 Acquisition: the simulator is run at 4 kHz (25 us internal step, as its
 1 kHz default) and the bag holds 1 kHz samples, each the mean of four
 (angles: the first), as a drive that samples at 4 kHz and logs averaged
-1 kHz data. Reason: ``hd_sim`` holds the position command for a whole log
+1 kHz data; the family units log at their own rate (200-2000 Hz), each row
+the mean of ``max(DECIM, ceil(FS_SIM / fs))`` sub-samples, angles the first
+(``make_family_bags``): torques and speeds are then centred (block - 1) / 2
+sub-samples after the angles (2.375 ms at 200 Hz; discovery identifies that
+skew on the speeds; docs/DISCOVERY_PASSES.md, "the kinematic-error ripple's
+phase at speed"). Reason: ``hd_sim`` holds the position command for a whole log
 period and logs instantaneous values at the same instant, so its native
 1 kHz logs carry a 1 kHz command-staircase current ripple sampled at a fixed
 phase (aliased to ~0 Hz, about 0.6 N*m of speed-correlated bias on tau_m);
