@@ -1337,38 +1337,102 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     # 4. final shapes of the selected shaped groups, each given all the others (CV profile + jackknife);
     # a group whose shape is no longer identified in the final model leaves it, and the selection is made
     # again without its family: a group that is not identified must not have steered which others entered
+    def select_and_confirm(closed, trace, statements, loop_done, fixed=None):
+        """Selection (select_groups) + final shapes (4) + reselection without unidentified families; returns
+        (sel, the selected shaped groups' shapes as selected {gi: {name: value}}). ``fixed`` {gi: (ok, note)}:
+        groups whose shape stays at its current value during the selection (their ``reshape`` keeps it, their
+        ``confirm`` answers the final model's identification); the final shapes (4) are identified freely."""
+        fixed = fixed or {}
+
+        def reshape_s(gi, cur_idx):
+            return True if gi in fixed else reshape(gi, cur_idx)
+
+        def confirm_s(gi, cur_idx):
+            return fixed[gi] if gi in fixed else confirm(gi, cur_idx)
+        sel, at_sel = [], {}
+        for _pass in range(4):
+            sel, tr = select_groups(gram, base_idx, groups, opt, reshape=reshape_s, confirm=confirm_s, closed=closed,
+                                    carrier=carrier)
+            trace += tr
+            if not loop_done:
+                # 4a. the selected hysteresis loop's shape (loopshape: Bouc-Wen family, Dahl inside); when it
+                # replaces the Dahl loop, the selection is made again with it (once)
+                loop_done = True
+                if _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, ds.block, opt, statements, trace,
+                                 _apply_basis=lambda gi: (_relink(gi), confirmed.pop(gi, None))):
+                    continue
+            at_sel = {gi: {sh.name: float(groups[gi][0].nonlinear.get(sh.name, np.nan)) for sh in groups[gi][0].shapes}
+                      for gi in sel if groups[gi][0].shapes}
+            dropped = []
+            for gi in list(sel):
+                cand, cix = groups[gi]
+                if not cand.shapes:
+                    continue
+                others = _model(base_idx, groups, [gj for gj in sel if gj != gi])
+                ok_, note = confirm(gi, others)
+                if not ok_:
+                    sel.remove(gi)
+                    dropped.append(cand.family)
+                    trace.append({"step": "drop (shape unidentified)", "candidate": f"{cand.name}[{cand.family}]",
+                                  "note": note})
+                    statements.append(f"{cand.name}: its shape is not identified in the final model ({note}); left out")
+            if not dropped or _pass == 3:
+                break
+            closed |= set(dropped)
+            trace.append({"step": "reselect", "closed": sorted(closed)})
+            statements.append(f"selection made again without {sorted(closed)} (not identified in the final model)")
+        return sel, at_sel
+
     closed: set[str] = set()
     trace = []
-    loop_done = False
-    for _pass in range(4):
-        sel, tr = select_groups(gram, base_idx, groups, opt, reshape=reshape, confirm=confirm, closed=closed,
-                                carrier=carrier)
-        trace += tr
-        if not loop_done:
-            # 4a. the selected hysteresis loop's shape (loopshape: Bouc-Wen family, Dahl inside); when it
-            # replaces the Dahl loop, the selection is made again with it (once)
-            loop_done = True
-            if _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, ds.block, opt, statements, trace,
-                             _apply_basis=lambda gi: (_relink(gi), confirmed.pop(gi, None))):
+    sel, at_sel = select_and_confirm(closed, trace, statements, loop_done=False)
+    # 4b. a selected group's shape is fixed while the later groups are chosen (it is reshaped only while a
+    # candidate), at the value identified with only the groups before it in the model; the final shapes (4) are
+    # identified given all the others. When a final shape moved from its selection-time value by more than its
+    # own SD (the rule the friction width's second look uses, :func:`_reidentify_width`), the later choices
+    # were made on a shape the final model rejects: candidates and selection are redone with that group's shape
+    # fixed at its final value (once), and the redone model is kept unless its fit-block CV error is higher
+    moved = {}
+    for gi in sel:
+        cand = groups[gi][0]
+        for sh in cand.shapes:
+            if sh.name in cand.nuisance or gi not in at_sel:
                 continue
-        dropped = []
-        for gi in list(sel):
-            cand, cix = groups[gi]
-            if not cand.shapes:
-                continue
-            others = _model(base_idx, groups, [gj for gj in sel if gj != gi])
-            ok_, note = confirm(gi, others)
-            if not ok_:
-                sel.remove(gi)
-                dropped.append(cand.family)
-                trace.append({"step": "drop (shape unidentified)", "candidate": f"{cand.name}[{cand.family}]",
-                              "note": note})
-                statements.append(f"{cand.name}: its shape is not identified in the final model ({note}); left out")
-        if not dropped or _pass == 3:
-            break
-        closed |= set(dropped)
-        trace.append({"step": "reselect", "closed": sorted(closed)})
-        statements.append(f"selection made again without {sorted(closed)} (not identified in the final model)")
+            v0, v1 = at_sel[gi].get(sh.name, np.nan), cand.nonlinear.get(sh.name, np.nan)
+            sd1 = cand.nonlinear.get(f"{sh.name}_sd", np.nan)
+            if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(sd1) and abs(v1 - v0) > sd1:
+                moved.setdefault(gi, []).append(f"{cand.name} {sh.name} {v0:.3g} -> {v1:.3g} +- {sd1:.2g}")
+    if moved:
+        cv_old = gram.cv_sse(_model(base_idx, groups, sel))
+        snap = {gi: (list(c.basis), dict(c.nonlinear)) for gi, (c, _) in enumerate(groups) if c.shapes}
+        fixed = {gi: confirm(gi, _model(base_idx, groups, [gj for gj in sel if gj != gi])) for gi in moved}
+        confirmed.clear()  # shapes identified given other models: asked again in the redo
+        tr_new, st_new, closed_new = [], [], set()
+        sel_new, _ = select_and_confirm(closed_new, tr_new, st_new, loop_done=True, fixed=fixed)
+        cv_new = gram.cv_sse(_model(base_idx, groups, sel_new))
+        what = "; ".join(m for v in moved.values() for m in v)
+        names = lambda ss: ", ".join(f"{groups[g][0].name}[{groups[g][0].family}]" for g in ss) or "none"
+        keep_new = float(cv_new.sum()) <= float(cv_old.sum())
+        trace.append({"step": "redo (selected shape moved)", "moved": what, "cv_sse_old": float(cv_old.sum()),
+                      "cv_sse_new": float(cv_new.sum()), "kept": "new" if keep_new else "old"})
+        if keep_new:
+            trace += tr_new
+            statements += st_new
+            closed = closed_new
+            statements.append(
+                f"a selected shape moved in the final model beyond its SD from the value it was selected with ({what}): "
+                f"candidates and selection redone with it fixed at its final value; selected {names(sel_new)} "
+                f"(fit-block CV SSE {float(cv_old.sum()):.4g} -> {float(cv_new.sum()):.4g}) instead of {names(sel)}")
+            sel = sel_new
+        else:
+            for gi, (basis, nl) in snap.items():
+                groups[gi][0].basis, groups[gi][0].nonlinear = basis, nl
+                _relink(gi)
+            confirmed.clear()
+            statements.append(
+                f"a selected shape moved in the final model beyond its SD from the value it was selected with ({what}): "
+                f"selection redone with it fixed at its final value gave {names(sel_new)} with a higher fit-block CV "
+                f"SSE ({float(cv_new.sum()):.4g} vs {float(cv_old.sum()):.4g}); the first selection kept")
     if transition_width is None and eps_fit is not None and not isinstance(fric, dict) and sel:
         rew = _reidentify_width(y, sig, srows, ds.block, target, avail, declared, extra_terms, twin_params, keep,
                                 X_all, base_idx, groups, sel, sgn_eps, (lo_eps, hi_eps))
