@@ -877,6 +877,24 @@ def split_fit_heldout(ds: Dataset, heldout_bags: list[int] | None, heldout_frac:
     return ho
 
 
+def moved_shapes(groups, sel: list[int], at_sel: dict) -> dict[int, list[str]]:
+    """The selected groups whose final shape moved from the value it was selected with by more than its own SD
+    (the rule of :func:`_reidentify_width`): {gi: ["name param v0 -> v1 +- sd", ...]}. ``at_sel``: {gi: {param:
+    value at selection}}; the final value and its SD are read from ``Candidate.nonlinear`` (``param``,
+    ``param_sd``); nuisance shapes and values without a finite SD are not judged."""
+    moved: dict[int, list[str]] = {}
+    for gi in sel:
+        cand = groups[gi][0]
+        for sh in cand.shapes:
+            if sh.name in cand.nuisance or gi not in at_sel:
+                continue
+            v0, v1 = at_sel[gi].get(sh.name, np.nan), cand.nonlinear.get(sh.name, np.nan)
+            sd1 = cand.nonlinear.get(f"{sh.name}_sd", np.nan)
+            if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(sd1) and abs(v1 - v0) > sd1:
+                moved.setdefault(gi, []).append(f"{cand.name} {sh.name} {v0:.3g} -> {v1:.3g} +- {sd1:.2g}")
+    return moved
+
+
 def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms, twin_params, keep, X_all,
                       base_idx, groups, sel, eps0: float, rng: tuple[float, float]) -> tuple | None:
     """The friction transition width identified again given the selected groups (CV profile + jackknife).
@@ -1392,16 +1410,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     # own SD (the rule the friction width's second look uses, :func:`_reidentify_width`), the later choices
     # were made on a shape the final model rejects: candidates and selection are redone with that group's shape
     # fixed at its final value (once), and the redone model is kept unless its fit-block CV error is higher
-    moved = {}
-    for gi in sel:
-        cand = groups[gi][0]
-        for sh in cand.shapes:
-            if sh.name in cand.nuisance or gi not in at_sel:
-                continue
-            v0, v1 = at_sel[gi].get(sh.name, np.nan), cand.nonlinear.get(sh.name, np.nan)
-            sd1 = cand.nonlinear.get(f"{sh.name}_sd", np.nan)
-            if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(sd1) and abs(v1 - v0) > sd1:
-                moved.setdefault(gi, []).append(f"{cand.name} {sh.name} {v0:.3g} -> {v1:.3g} +- {sd1:.2g}")
+    moved = moved_shapes(groups, sel, at_sel)
     if moved:
         cv_old = gram.cv_sse(_model(base_idx, groups, sel))
         snap = {gi: (list(c.basis), dict(c.nonlinear)) for gi, (c, _) in enumerate(groups) if c.shapes}
@@ -1419,10 +1428,12 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             trace += tr_new
             statements += st_new
             closed = closed_new
+            same = sorted(sel_new) == sorted(sel)
             statements.append(
                 f"a selected shape moved in the final model beyond its SD from the value it was selected with ({what}): "
                 f"candidates and selection redone with it fixed at its final value; selected {names(sel_new)} "
-                f"(fit-block CV SSE {float(cv_old.sum()):.4g} -> {float(cv_new.sum()):.4g}) instead of {names(sel)}")
+                f"(fit-block CV SSE {float(cv_old.sum()):.4g} -> {float(cv_new.sum()):.4g})"
+                + (", the same groups" if same else f" instead of {names(sel)}"))
             sel = sel_new
         else:
             for gi, (basis, nl) in snap.items():

@@ -1,0 +1,34 @@
+"""The rule that triggers discover's redo of candidates and selection (issue 10, disc26): a selected group's final
+shape moved from its selection-time value by more than its own SD (the friction width's rule)."""
+import numpy as np
+
+from hd_ground.discovery.core import moved_shapes
+from hd_ground.discovery.library import Candidate
+from hd_twin.identify import Shape
+
+
+def _dead_zone(j, j_sd, nuisance=()):
+    c = Candidate(name="backlash", family="backlash", variable="windup", order=None, basis=[], form="dz(w, j)",
+                  shapes=[Shape("j", 1e-5, 1e-3)], make_basis=lambda sh: [{"op": "var", "var": "windup"}],
+                  nuisance=nuisance)
+    c.set_shape({"j": j}, {"j": j_sd})
+    return c
+
+
+def test_moved_beyond_sd_triggers_and_within_sd_does_not():
+    # seed 3100's case: selected at 4.2e-4 (baseline only), final 1.37e-4 +- 1.1e-5: moved by 26 SD
+    groups = [(_dead_zone(1.37e-4, 1.1e-5), [3]), (_dead_zone(2.41e-4, 3e-5), [4])]
+    at_sel = {0: {"j": 4.2e-4}, 1: {"j": 2.66e-4}}  # the second moved by 0.8 SD: not judged moved
+    m = moved_shapes(groups, [0, 1], at_sel)
+    assert list(m) == [0]
+    assert "0.00042 -> 0.000137" in m[0][0]
+
+
+def test_nuisance_unselected_and_unknown_sd_are_not_judged():
+    g_nuis = (_dead_zone(1.0e-4, 1e-6, nuisance=("j",)), [3])
+    g_nosd = (_dead_zone(1.0e-4, float("nan")), [4])
+    g_unsel = (_dead_zone(1.0e-4, 1e-6), [5])
+    at_sel = {0: {"j": 5e-4}, 1: {"j": 5e-4}, 2: {"j": 5e-4}}
+    assert moved_shapes([g_nuis, g_nosd, g_unsel], [0, 1], at_sel) == {}
+    assert list(moved_shapes([g_nuis, g_nosd, g_unsel], [2], at_sel)) == [2]
+    assert np.isfinite(g_unsel[0].nonlinear["j_sd"])
