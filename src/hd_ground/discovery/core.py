@@ -25,7 +25,10 @@ plots and the report). Steps, for one measured target signal:
    and its within-block coefficients are identified and equal to the pooled ones, ``within_block_coefficients``,
    a Hausman test); a backward pass drops groups that became redundant or lost
    identification. Alternatives of one family compete; one survives. A shaped group that is not identified
-   in the final model closes its family and the selection is made again; the friction transition width is
+   in the final model closes its family and the selection is made again. A selected group's shape is fixed at
+   its selection-time value while later groups are chosen; when its final shape (given all the others) moved
+   beyond its SD from that value, candidates and selection are redone once with it fixed at the final value,
+   and the redone model is kept unless its fit-block CV error is higher (``moved_shapes``). The friction transition width is
    identified again given the selected groups, and when it moves beyond its SD, candidates and selection are
    redone with it (one second pass).
 5. The selected model is refitted on all fit data and scored on the held-out
