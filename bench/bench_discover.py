@@ -319,24 +319,35 @@ def _match(k, want) -> bool:
 def _greedy(bags: list[str], signal: str, twist_window: int = 0) -> dict:
     """The plain greedy least-squares reference on the same bags, the last one held out (``twist_window``: discover's
     choice of theta_f's smoothing for the twist, ``report.json`` ``twist_window_samples``; Q_red only)."""
-    from hd_bag import read_mission
-    from hd_ground.discovery.core import Options, choose_alpha_window, choose_speed_timing, standstill_rows
-    from hd_ground.discovery.data import dataset_from_missions, with_smoothed_twist
+    from hd_ground.discovery.core import Options, standstill_rows
+    from hd_ground.discovery.data import with_smoothed_twist
     from hd_ground.discovery.greedy import greedy_discover
 
-    ms = [read_mission(b) for b in bags]
-    ds = dataset_from_missions(ms, [str(b) for b in bags])
-    ho = ds.bag == len(bags) - 1
-    if ds.speed_lags:  # the same signals discover reads (its speed-timing choice, made on the fit bags)
-        ds = choose_speed_timing(dataset_from_missions(ms, [str(b) for b in bags], retime_speeds=False), ds, ho)[0]
-    if ALPHA_WINDOW != "default":  # ... and the same acceleration (its timing / window choice, on the fit bags)
-        ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
-            ms, [str(b) for b in bags], retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho,
-            mode=ALPHA_WINDOW)[0]
+    ds, ho = discover_dataset(bags)
     if twist_window:  # ... and the same twist discover's Q_red models read (its choice on the fit bags)
         ds = with_smoothed_twist(ds, twist_window)
     still = standstill_rows(ds, Options().standstill_sigmas)[0] if signal == "tau_m" else None
     return greedy_discover(ds, signal, ho, standstill=still)
+
+
+def discover_dataset(bags: list[str]):
+    """(dataset, held-out mask) of ``bags``, the last one held out, with the signals discover reads: its speed-timing
+    choice and its acceleration window / timing choice (``ALPHA_WINDOW``), both made on the fit bags. Used by the
+    greedy reference and the discover-vs-greedy diagnoses (``diag_*_vs_greedy.py``)."""
+    from hd_bag import read_mission
+    from hd_ground.discovery.core import choose_alpha_window, choose_speed_timing
+    from hd_ground.discovery.data import dataset_from_missions
+
+    names = [str(b) for b in bags]
+    ms = [read_mission(b) for b in bags]
+    ds = dataset_from_missions(ms, names)
+    ho = ds.bag == len(bags) - 1
+    if ds.speed_lags:  # the same signals discover reads (its speed-timing choice, made on the fit bags)
+        ds = choose_speed_timing(dataset_from_missions(ms, names, retime_speeds=False), ds, ho)[0]
+    if ALPHA_WINDOW != "default":  # ... and the same acceleration (its timing / window choice, on the fit bags)
+        ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
+            ms, names, retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho, mode=ALPHA_WINDOW)[0]
+    return ds, ho
 
 
 def _plant2_param_errors(effect: str, rep: dict, g: dict, truth: dict) -> tuple[str, str]:

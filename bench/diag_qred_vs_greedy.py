@@ -27,11 +27,9 @@ import numpy as np
 def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_discover as B
-    from hd_bag import read_mission
-    from hd_ground.discovery.core import chunked_paired_z, choose_alpha_window, choose_speed_timing
-    from hd_ground.discovery.data import dataset_from_missions, with_smoothed_twist
+    from diag_models import ModelTable
+    from hd_ground.discovery.data import with_smoothed_twist
     from hd_ground.discovery.greedy import _groups
-    from hd_twin.identify import BlockGram
     from hd_twin.terms import basis_matrix
 
     args = list(argv if argv is not None else sys.argv[1:])
@@ -50,13 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     s0 = next(x for x in rep["signals"] if x["signal"] == "Q_red")
     tw_d = int(rep.get("twist_window_samples", 0))
     bags = sorted(glob.glob(str(case / "bags" / "*.mcap")))
-    ms = [read_mission(b) for b in bags]
-    ds0 = dataset_from_missions(ms, bags)
-    ho = ds0.bag == len(bags) - 1
-    if ds0.speed_lags:
-        ds0 = choose_speed_timing(dataset_from_missions(ms, bags, retime_speeds=False), ds0, ho)[0]
-    ds0 = choose_alpha_window(lambda win, timing, re=bool(ds0.speed_lags): dataset_from_missions(
-        ms, bags, retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds0, ho, mode=B.ALPHA_WINDOW)[0]
+    ds0, ho = B.discover_dataset(bags)
     fit = ~ho
     blk = ds0.block
     print(f"rows: fit {fit.sum()} in {len(np.unique(blk[fit]))} blocks, held-out {ho.sum()}; discover's twist "
@@ -65,36 +57,14 @@ def main(argv: list[str] | None = None) -> int:
         par = {k: round(v, 6) for k, v in t["parameters"].items() if not k.endswith(("_sd", "_se", "_weak"))}
         print(f"discover term: {t['name']}({t['variable']}, {t.get('order')}) {json.dumps(par)}")
 
-    def lsq(X, yy):
-        s = np.sqrt(np.mean(X**2, 0)) + 1e-300
-        return np.linalg.lstsq(X / s, yy, rcond=None)[0] / s
-
     for tw in (windows or [tw_d]):
         ds = with_smoothed_twist(ds0, tw) if tw else ds0
         sig = ds.signals
         y = sig["Q_red"]
         avail = {k for k, v in sig.items() if np.std(v) > 0}
         print(f"\n===== twist window {tw} =====")
-        rows: dict[str, tuple] = {}
-
-        def score(cols):
-            X = np.column_stack(cols)
-            b = lsq(X[fit], y[fit])
-            r = (y - X @ b)[ho]
-            cv = BlockGram(X[fit], y[fit], blk[fit]).cv_sse()
-            return r, cv
-
-        def report(name, cols, ref=None):
-            r, cv = score(cols)
-            rows[name] = (r, cv)
-            s = f"{name:52s} held-out {np.sqrt(np.mean(r**2)):8.4f}  CV {np.sqrt(cv.sum() / fit.sum()):8.4f}"
-            if ref is not None:
-                r0, cv0 = rows[ref]
-                d = cv0 - cv
-                t = d.mean() / (d.std(ddof=1) / np.sqrt(len(d))) if np.std(d) > 0 else 0.0
-                s += (f"  vs [{ref}]: CV {(cv.sum() - cv0.sum()) / cv0.sum() * 100:+6.1f}% ({np.mean(d > 0) * 100:.0f}%"
-                      f" blocks, t {t:+.2f}), held-out z {chunked_paired_z(r**2 - r0**2, 20):+.2f}")
-            print(s)
+        table = ModelTable(y, fit, ho, blk, width=52, digits=4)
+        score, report = table.score, table.report
 
         base = [sig["windup"], sig["windup_dot"]] + ([sig["alpha_f"]] if "alpha_f" in avail else [])
         tc = {f"{t['name']}:{t.get('order')}:{t['form'].split()[1 if t['form'].startswith('K ') else 0]}":
@@ -114,20 +84,7 @@ def main(argv: list[str] | None = None) -> int:
                 sc = float(np.quantile(np.abs(sig["windup"]), 0.9))
                 n += f" j={np.geomspace(0.02, 0.3, 4)[sum(1 for h in groups[:i] if h[0] == 'backlash')] * sc:.3g}"
             names.append(n)
-        cols, used, prev, chosen = list(base), set(), B0, []
-        cur = float(np.sum(rows[B0][0] ** 2))
-        while len(chosen) < 6:
-            trial = [(float(np.sum(score(cols + g[3])[0] ** 2)), i) for i, g in enumerate(groups) if i not in used]
-            e, i = min(trial)
-            if (cur - e) / cur < 0.02:
-                break
-            used.add(i)
-            chosen.append(i)
-            cols = cols + groups[i][3]
-            nm = "greedy + " + names[i]
-            report(nm, cols, prev)
-            prev, cur = nm, e
-        G = prev
+        cols, chosen, G = table.greedy_replay(base, B0, groups, names)
         report("(greedy final vs discover final)", cols, D)
         print("-- each greedy group added to discover's final model:")
         for i in chosen:
@@ -167,10 +124,7 @@ def main(argv: list[str] | None = None) -> int:
                          "dz + KE2 load + PDS2": bj + kel(2) + pds(2), "dz + KE2 plain + KE2 load": bj + s2(2) + kel(2),
                          "dz + KE2 load + KE2 plain + PDS2": bj + kel(2) + s2(2) + pds(2)}.items():
                 report(f"j={j:.3g}: {k}", base + v, D)
-        cvD, cvG = rows[D][1], rows[G][1]
-        print("per fit block CV SSE, discover | greedy:")
-        for j, b in enumerate(np.unique(blk[fit])):
-            print(f"   block {b:3d} bag {int(ds.bag[blk == b][0])}: {cvD[j]:12.1f} {cvG[j]:12.1f}")
+        table.per_block(D, G, lambda b: int(ds.bag[blk == b][0]), fmt="12.1f")
     return 0
 
 

@@ -25,26 +25,18 @@ import numpy as np
 def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_discover as B
-    from hd_bag import read_mission
-    from hd_ground.discovery.core import (Options, StateSignals, chunked_paired_z, choose_alpha_window,
-                                          choose_speed_timing, standstill_rows)
-    from hd_ground.discovery.data import dataset_from_missions
+    from diag_models import ModelTable
+    from hd_ground.discovery.core import Options, StateSignals, _lstsq, chunked_paired_z, standstill_rows
     from hd_ground.discovery.greedy import _groups
     from hd_ground.discovery.prefilter import shifted_state_var
-    from hd_twin.identify import BlockGram, presliding_state
+    from hd_twin.identify import presliding_state
     from hd_twin.terms import basis_matrix
 
     args = argv if argv is not None else sys.argv[1:]
     case = Path(args[0])
     rep = json.loads(Path(args[1] if len(args) > 1 else case / "discovery" / "report.json").read_text())
     bags = sorted(glob.glob(str(case / "bags" / "*.mcap")))
-    ms = [read_mission(b) for b in bags]
-    ds = dataset_from_missions(ms, bags)
-    ho = ds.bag == len(bags) - 1
-    if ds.speed_lags:
-        ds = choose_speed_timing(dataset_from_missions(ms, bags, retime_speeds=False), ds, ho)[0]
-    ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
-        ms, bags, retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho, mode=B.ALPHA_WINDOW)[0]
+    ds, ho = B.discover_dataset(bags)
     still = standstill_rows(ds, Options().standstill_sigmas)[0]
     keep = ~still
     sig = {k: v[keep] for k, v in ds.signals.items()}
@@ -57,33 +49,8 @@ def main(argv: list[str] | None = None) -> int:
     nfb = len(np.unique(blk[fit]))
     print(f"rows: fit {fit.sum()} in {nfb} blocks, held-out {hok.sum()}; acceleration window "
           f"{getattr(ds, 'alpha_window', '?')}")
-
-    def lsq(X, yy):
-        s = np.sqrt(np.mean(X**2, 0)) + 1e-300
-        return np.linalg.lstsq(X / s, yy, rcond=None)[0] / s
-
-    def score(cols):
-        X = np.column_stack(cols)
-        b = lsq(X[fit], y[fit])
-        r = (y - X @ b)[hok]
-        cv = BlockGram(X[fit], y[fit], blk[fit]).cv_sse()
-        return r, cv
-
-    rows: dict[str, tuple] = {}
-
-    def report(name, cols, ref=None):
-        r, cv = score(cols)
-        rows[name] = (r, cv)
-        s = f"{name:58s} held-out {np.sqrt(np.mean(r**2)):.5f}  CV {np.sqrt(cv.sum() / fit.sum()):.5f}"
-        if ref is not None:
-            r0, cv0 = rows[ref]
-            d = cv0 - cv
-            t = d.mean() / (d.std(ddof=1) / np.sqrt(len(d))) if np.std(d) > 0 else 0.0
-            s += (f"  vs [{ref}]: CV SSE {(cv.sum() - cv0.sum()) / cv0.sum() * 100:+.2f}% (better in "
-                  f"{np.mean(d > 0) * 100:.0f}% of blocks, t {t:+.2f}), held-out paired z "
-                  f"{chunked_paired_z(r**2 - r0**2, 20):+.2f}")
-        print(s)
-        return r, cv
+    table = ModelTable(y, fit, hok, blk, width=58, digits=5)
+    rows, score, report = table.rows, table.score, table.report
 
     s0 = rep["signals"][0] if rep["signals"][0]["signal"] == "tau_m" else next(
         x for x in rep["signals"] if x["signal"] == "tau_m")
@@ -114,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     best = None
     for eps in np.geomspace(1e-3, 0.3, 8) * scale:
         X = np.column_stack(dbase + [np.tanh(w / eps)])
-        r = y[fit] - X[fit] @ lsq(X[fit], y[fit])
+        r = y[fit] - X[fit] @ _lstsq(X[fit], y[fit])
         if best is None or r @ r < best[0]:
             best = (float(r @ r), eps)
     eps_g = best[1]
@@ -122,28 +89,9 @@ def main(argv: list[str] | None = None) -> int:
     groups = _groups(sig, "tau_m", eps_g, avail)
     G0 = f"greedy baseline (tanh eps_g {eps_g:.3g})"
     report(G0, gbase, D)
-    cols, used, prev = list(gbase), set(), G0
-    cur = float(np.sum(rows[G0][0] ** 2))
-    chosen = []
-    while len(chosen) < 6:
-        trial = []
-        for i, g in enumerate(groups):
-            if i in used:
-                continue
-            r, _ = score(cols + g[3])
-            trial.append((float(r @ r), i))
-        e, i = min(trial)
-        if (cur - e) / cur < 0.02:
-            break
-        used.add(i)
-        chosen.append(i)
-        cols = cols + groups[i][3]
-        name = f"greedy + {groups[i][0]}({groups[i][1]}, {groups[i][2]})"
-        if groups[i][0] == "stribeck_friction":
-            name += f" ws#{i}"
-        report(name, cols, prev)
-        prev, cur = name, e
-    G = prev
+    names = [f"{g[0]}({g[1]}, {g[2]})" + (f" ws#{i}" if g[0] == "stribeck_friction" else "")
+             for i, g in enumerate(groups)]
+    _, chosen, G = table.greedy_replay(gbase, G0, groups, names)
 
     # swaps: each greedy group on top of discover's model, and discover's terms on greedy's baseline
     print("-- greedy's groups added to discover's model, one at a time:")
@@ -176,11 +124,7 @@ def main(argv: list[str] | None = None) -> int:
             report(f"  d {d:.2e}: s, exp(-(|w|/{vs:.3g})^{de:.3g}) s",
                    dbase + [z, np.exp(-(np.abs(w) / vs) ** de) * z], D)
     # per-block CV of both final models
-    cvD, cvG = rows[D][1], rows[G][1]
-    print("per fit block CV SSE, discover | greedy | bag:")
-    ub = np.unique(blk[fit])
-    for j, b in enumerate(ub):
-        print(f"   block {b:3d} bag {int(ds.bag[keep][blk == b][0])}: {cvD[j]:10.3f} {cvG[j]:10.3f}")
+    table.per_block(D, G, lambda b: int(ds.bag[keep][blk == b][0]))
     rD, rG = rows[D][0], rows[G][0]
     print(f"held-out discover {np.sqrt(np.mean(rD**2)):.5f} greedy {np.sqrt(np.mean(rG**2)):.5f} paired z "
           f"{chunked_paired_z(rD**2 - rG**2, 20):+.2f}")
