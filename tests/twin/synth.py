@@ -45,3 +45,24 @@ def synth_mission(actuator: str = "EMA-T1", index: int = 0, fs: float = 200.0, d
 def synth_fleet(n_act: int = 4, per_act: int = 2, **kw) -> list[Mission]:
     return [synth_mission(f"EMA-T{a}", i, seed=10 * a + i, K_aero=200 + 50 * a, **kw)
             for a in range(n_act) for i in range(per_act)]
+
+
+def tiny_twin_with_and_without(tmp_path, key: str, entry: dict, fleet: list[Mission] | None = None):
+    """A tiny twin (1 epoch, no physics path) trained on ``fleet`` (default ``synth_fleet(2, 2, duration=2.0)``) with
+    the config entry ``key`` = ``entry`` (``TrainConfig`` field of the same name), and a copy of it whose
+    config.json lacks the entry: the same network as every earlier model reads it. Returns (model dir, copy dir);
+    asserts that training wrote the entry."""
+    import json
+    import shutil
+
+    from hd_twin.train import TrainConfig, train_twin
+
+    new, old = tmp_path / "m", tmp_path / "old"
+    train_twin(fleet if fleet is not None else synth_fleet(2, 2, duration=2.0), new, TrainConfig.from_preset(
+        "tiny", epochs=1, physics_path="none", plots=False, **{key: entry}), progress=False)
+    cfg = json.loads((new / "config.json").read_text())
+    assert cfg[key] == entry
+    shutil.copytree(new, old)
+    del cfg[key]
+    (old / "config.json").write_text(json.dumps(cfg))
+    return new, old

@@ -139,23 +139,14 @@ def test_trained_twin_stores_the_entry_and_streams_on_the_retimed_speeds(tmp_pat
     """Training with an entry writes it to config.json; the ONNX runtime applies it causally at the input rate
     (its output equals the same network fed speeds re-timed by CausalRetimer); without the entry the runtime
     is the one of every earlier model."""
-    import shutil
-
     from hd_twin.runtime import StreamingTwin
-    from hd_twin.train import TrainConfig, train_twin
-    from tests.twin.synth import synth_fleet, synth_mission
+    from tests.twin.synth import synth_mission, tiny_twin_with_and_without
 
     entry = {"omega_m": {"tau_s": 3e-3, "se": 1e-4}, "window_s": 0.02}
-    train_twin(synth_fleet(2, 2, duration=2.0), tmp_path / "m", TrainConfig.from_preset(
-        "tiny", epochs=1, physics_path="none", plots=False, speed_timing=entry), progress=False)
-    cfg = json.loads((tmp_path / "m" / "config.json").read_text())
-    assert cfg["speed_timing"] == entry
-    shutil.copytree(tmp_path / "m", tmp_path / "old")
-    del cfg["speed_timing"]
-    (tmp_path / "old" / "config.json").write_text(json.dumps(cfg))
+    d_new, d_old = tiny_twin_with_and_without(tmp_path, "speed_timing", entry)
     m = synth_mission("EMA-NEW", 9, seed=123, duration=1.0)
     X = D.mission_inputs(m)
-    new, old = StreamingTwin(tmp_path / "m", fs_in=m.fs), StreamingTwin(tmp_path / "old", fs_in=m.fs)
+    new, old = StreamingTwin(d_new, fs_in=m.fs), StreamingTwin(d_old, fs_in=m.fs)
     q_new = np.concatenate([new.step(X[i:i + 64])["Q_red"] for i in range(0, len(X), 64)])
     q_ref = old.step(CausalRetimer(SpeedTiming.from_config(entry), m.fs).step(X))["Q_red"]
     assert np.allclose(q_new, q_ref, rtol=0, atol=1e-6 * np.max(np.abs(q_ref)))

@@ -127,30 +127,21 @@ def test_trained_twin_stores_the_entry_and_streams_on_the_smoothed_angle(tmp_pat
     """Training with an entry writes it to config.json; the ONNX runtime applies it at the input rate (its causal
     output equals the same network fed theta_f smoothed by CausalSmoother); without the entry the runtime is the
     one of every earlier model; `hdphm train --model-config` takes the entry."""
-    import shutil
-
     from hd_twin.cli import _model_config
     from hd_twin.runtime import StreamingTwin
-    from hd_twin.train import TrainConfig, train_twin
-    from tests.twin.synth import synth_fleet, synth_mission
+    from tests.twin.synth import synth_fleet, synth_mission, tiny_twin_with_and_without
 
     entry = {"window_s": 0.045, "polyorder": 2}  # 9 samples at the synthetic fleet's 200 Hz
-    train_twin([_quantised(m, 1e-3) for m in synth_fleet(2, 2, duration=2.0)], tmp_path / "m", TrainConfig.from_preset(
-        "tiny", epochs=1, physics_path="none", plots=False, twist_smoothing=entry), progress=False)
-    cfg = json.loads((tmp_path / "m" / "config.json").read_text())
-    assert cfg["twist_smoothing"] == entry
-    shutil.copytree(tmp_path / "m", tmp_path / "old")
-    del cfg["twist_smoothing"]
-    (tmp_path / "old" / "config.json").write_text(json.dumps(cfg))
+    d_new, d_old = tiny_twin_with_and_without(tmp_path, "twist_smoothing", entry,
+                                              [_quantised(m, 1e-3) for m in synth_fleet(2, 2, duration=2.0)])
     m = _quantised(synth_mission("EMA-NEW", 9, seed=123, duration=1.0), 1e-3)
     X = D.mission_inputs(m)
-    new, old = StreamingTwin(tmp_path / "m", fs_in=m.fs), StreamingTwin(tmp_path / "old", fs_in=m.fs)
+    new, old = StreamingTwin(d_new, fs_in=m.fs), StreamingTwin(d_old, fs_in=m.fs)
     q_new = np.concatenate([new.step(X[i:i + 64])["Q_red"] for i in range(0, len(X), 64)])
     q_ref = old.step(CausalSmoother(TwistSmoothing.from_config(entry), m.fs).step(X))["Q_red"]
     assert np.allclose(q_new, q_ref, rtol=0, atol=1e-6 * np.max(np.abs(q_ref)))
     old.reset(m.fs)
     assert not np.allclose(old.step(X)["Q_red"], q_ref, rtol=0, atol=1e-6 * np.max(np.abs(q_ref)))
-    # fixed lag: the lag includes half the smoothing window (4 rows at 200 Hz)
     # fixed lag: the streamed outputs are those of the batch-smoothed inputs, half a window (4 rows at 200 Hz) late
     new.set_mode("fixed_lag")
     old.set_mode("fixed_lag")
