@@ -88,7 +88,7 @@ class TwistSmoothing:
             return cls()
         if not isinstance(entry, Mapping):
             raise ValueError(f"{where}: expected a mapping {{window_s, polyorder}}, got {type(entry).__name__}")
-        unknown = set(entry) - {"window_s", "polyorder", "samples_at_fit", "fs_fit_hz"}
+        unknown = set(entry) - {"window_s", "polyorder"}
         if unknown:
             raise ValueError(f"{where}: unknown key(s) {sorted(unknown)}; expected window_s, polyorder")
         window_s = entry.get("window_s", 0.0)
@@ -224,8 +224,6 @@ class CausalSmoother:
         full = (np.where(ok, k - last_bad, 0) >= self.w)[start:]  # a whole finite window ends at the row
         if full.any():
             win = np.lib.stride_tricks.sliding_window_view(np.where(ok, buf, 0.0), self.w)
-            x = x.copy()
-            x[full] = win[(k[start:] - self.w + 1)[full]] @ self.end
-            X[:, THETA_F_COLUMN] = x
+            X[full, THETA_F_COLUMN] = win[(k[start:] - self.w + 1)[full]] @ self.end
         self.hist = buf[-(self.w - 1):]
         return X

@@ -1425,6 +1425,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         what = "; ".join(m for v in moved.values() for m in v)
         names = lambda ss: ", ".join(f"{groups[g][0].name}[{groups[g][0].family}]" for g in ss) or "none"
         keep_new = float(cv_new.sum()) <= float(cv_old.sum())
+        head = f"a selected shape moved in the final model beyond its SD from the value it was selected with ({what}): "
         trace.append({"step": "redo (selected shape moved)", "moved": what, "cv_sse_old": float(cv_old.sum()),
                       "cv_sse_new": float(cv_new.sum()), "kept": "new" if keep_new else "old"})
         if keep_new:
@@ -1433,8 +1434,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             closed = closed_new
             same = sorted(sel_new) == sorted(sel)
             statements.append(
-                f"a selected shape moved in the final model beyond its SD from the value it was selected with ({what}): "
-                f"candidates and selection redone with it fixed at its final value; selected {names(sel_new)} "
+                head + f"candidates and selection redone with it fixed at its final value; selected {names(sel_new)} "
                 f"(fit-block CV SSE {float(cv_old.sum()):.4g} -> {float(cv_new.sum()):.4g})"
                 + (", the same groups" if same else f" instead of {names(sel)}"))
             sel = sel_new
@@ -1444,8 +1444,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 _relink(gi)
             confirmed.clear()
             statements.append(
-                f"a selected shape moved in the final model beyond its SD from the value it was selected with ({what}): "
-                f"selection redone with it fixed at its final value gave {names(sel_new)} with a higher fit-block CV "
+                head + f"selection redone with it fixed at its final value gave {names(sel_new)} with a higher fit-block CV "
                 f"SSE ({float(cv_new.sum()):.4g} vs {float(cv_old.sum()):.4g}); the first selection kept")
     if transition_width is None and eps_fit is not None and not isinstance(fric, dict) and sel:
         rew = _reidentify_width(y, sig, srows, ds.block, target, avail, declared, extra_terms, twin_params, keep,
