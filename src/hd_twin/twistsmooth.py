@@ -42,6 +42,9 @@ import numpy as np
 THETA_F_COLUMN = 3
 #: Longest smoothing window accepted from a config [s]: the twist's own dynamics are faster than this.
 MAX_WINDOW_S = 1.0
+#: Longest window [samples] the streamers take: the fixed-lag weights (the batch fit's edge rows) hold w^2 numbers, so a
+#: window at an absurd input rate (a hostile or mislabelled bag) is refused instead of allocated (4097: 134 MB).
+MAX_STREAM_WINDOW = 4097
 
 
 def window_samples(window_s: float, fs: float) -> int:
@@ -143,10 +146,16 @@ def _weights(w: int, polyorder: int):
     return FIRWeights(rows[m], np.array(rows[:m]), np.array(rows[w - m:]), 1.0)
 
 
-def _check_fs(fs: float) -> float:
+def _stream_window(smoothing: TwistSmoothing, fs: float) -> int:
+    """The streamers' window in samples at ``fs`` [Hz]; ValueError naming the problem for a bad rate or a window
+    longer than :data:`MAX_STREAM_WINDOW`."""
     if not (isinstance(fs, (int, float)) and math.isfinite(fs) and fs > 0):
         raise ValueError(f"twist smoothing: sample rate must be a positive number, got {fs!r}")
-    return float(fs)
+    w = smoothing.samples(float(fs))
+    if w > MAX_STREAM_WINDOW:
+        raise ValueError(f"twist smoothing: a {smoothing.window_s:g} s window is {w} samples at {fs:g} Hz, more than "
+                         f"the streaming twin takes ({MAX_STREAM_WINDOW})")
+    return w
 
 
 class CentredSmoother:
@@ -158,7 +167,7 @@ class CentredSmoother:
     def __init__(self, smoothing: TwistSmoothing, fs: float):
         from .streamfir import CentredFIR  # noqa: PLC0415
 
-        self.w = smoothing.samples(_check_fs(fs))
+        self.w = _stream_window(smoothing, fs)
         self.on = smoothing.active and self.w > smoothing.polyorder + 1
         self.fir = CentredFIR(_weights(self.w, smoothing.polyorder), short=lambda x: x.copy()) if self.on else None
         self.reset()
@@ -199,9 +208,14 @@ class CausalSmoother:
     keep the logged value (a non-finite sample restarts the window)."""
 
     def __init__(self, smoothing: TwistSmoothing, fs: float):
-        self.w = smoothing.samples(_check_fs(fs))
+        self.w = _stream_window(smoothing, fs)
         self.on = smoothing.active and self.w > smoothing.polyorder + 1
-        self.end = _weights(self.w, smoothing.polyorder).right[-1] if self.on else None
+        if self.on:  # the end-of-window row of the batch fit's weights (only that row: O(w), not w^2)
+            from scipy.signal import savgol_coeffs
+
+            self.end = savgol_coeffs(self.w, smoothing.polyorder, pos=self.w - 1, use="dot")
+        else:
+            self.end = None
         self.reset()
 
     lag = 0

@@ -115,6 +115,20 @@ def test_causal_streaming_smooths_the_quantised_angle():
     assert np.allclose(whole, got, rtol=0, atol=1e-12)  # the same whatever the calls
 
 
+def test_streamers_refuse_a_window_they_cannot_hold():
+    """A window that is absurd at the input rate (a mislabelled or hostile bag's rate) is refused with a clear error,
+    not allocated (the streamers' weights hold w^2 numbers); the batch smoother has no such weights."""
+    from hd_twin.twistsmooth import MAX_STREAM_WINDOW
+
+    sm = TwistSmoothing(0.5)
+    for fixed_lag in (False, True):
+        assert sm.streamer(1000.0, fixed_lag=fixed_lag).w == 501
+        with pytest.raises(ValueError, match=f"more than the streaming twin takes \\({MAX_STREAM_WINDOW}\\)"):
+            sm.streamer(1e6, fixed_lag=fixed_lag)
+        with pytest.raises(ValueError, match="sample rate must be a positive number"):
+            sm.streamer(float("nan"), fixed_lag=fixed_lag)
+
+
 def test_window_in_samples_at_other_rates():
     assert window_samples(0.009, 1000.0) == 9 and window_samples(0.009, 250.0) == 3
     x = np.cumsum(np.random.default_rng(1).normal(size=50))
