@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -184,6 +185,9 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
     truth = json.loads((Path(fleet_dir) / "fleet_truth.json").read_text())
     ev = {a["actuator_id"]: UnitEvents(failure=float(a["eol_mission"])) for a in truth["actuators"]
           if a.get("eol_mission") is not None}
+    if args.inspect_every or args.inspect_at_failure:  # the overhaul shop's gauge (scoring side: reads the truth)
+        ev = shop_inspections(truth, ev, args.inspect_every, args.inspect_quantity, args.inspect_noise,
+                              args.inspect_at_failure, args.seed)
     write_events(out / f"{name}_events.csv", ev)
     fleet = load_fleet(fleet_dir, cache_dir=out / "cache" / name, progress=False, workers=args.workers)
     res = {}
@@ -220,6 +224,54 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
     res["reference_name"] = "wear-truth-calibrated PF (fit_population on /sim/health of the training units)"
     res["bound"] = threshold_bound(truth, eols)
     return res, exposure
+
+
+ARCMIN = np.pi / (180.0 * 60.0)
+#: quantity -> (unit, default measurement sd in SI): the shop's gauge resolution / repeatability
+#: (src/hd_prognostic/README.md, "What inspections at overhaul buy"): lost motion 0.1 arcmin (a lost-motion
+#: test rig's repeatability; its encoder resolves ~1 arcsec), wear depth 1 um (tooth-profile CMM)
+SHOP_QUANTITIES = {"lost_motion": ("rad", 0.1 * ARCMIN), "wear_depth": ("m", 1.0e-6)}
+
+
+def shop_value(params: dict, mission: dict, quantity: str) -> float:
+    """The true value of ``quantity`` at the start of one mission, from the simulator's truth (scoring code).
+    ``wear_depth``: mean flank wear h = (h+ + h-)/2 [m]; ``lost_motion``: the angular backlash at the output,
+    ``max(0, h+ + h- - 2 delta_0) / cos(alpha_p) / r_m`` [rad] (PHYSICS.md 4: the gap once the preload is worn
+    through; the elastic part of a lost-motion reading is wear-independent and left out)."""
+    hp, hm = float(mission["h_plus"]), float(mission["h_minus"])
+    if quantity == "wear_depth":
+        return 0.5 * (hp + hm)
+    if quantity == "lost_motion":
+        return max(0.0, hp + hm - 2.0 * float(params["delta_0"])) / math.cos(float(params["alpha_p"])) \
+            / float(params["r_m"])
+    raise ValueError(f"inspection quantity {quantity!r} is not one of {', '.join(SHOP_QUANTITIES)}")
+
+
+def shop_inspections(truth: dict, events: dict, every: int, quantity: str, noise: float | None,
+                     at_failure: bool = False, seed: int = 0) -> dict:
+    """An operator's events with overhaul inspections added: ``quantity`` measured at missions every, 2 every, ...
+    before each unit's failure (units in service: up to their last mission) and, with ``at_failure``, at the
+    teardown of a failed unit (its failure mission), each value = truth + N(0, noise^2) (``noise`` None: the
+    quantity's default gauge sd, :data:`SHOP_QUANTITIES`). Seeded per unit (same values for the same seed)."""
+    from hd_prognostic.lifemodel import UnitEvents
+
+    sd = SHOP_QUANTITIES[quantity][1] if noise is None else float(noise)
+    out = {}
+    for k, a in enumerate(truth["actuators"]):
+        aid = a["actuator_id"]
+        old = events.get(aid, UnitEvents())
+        by_m = {int(m["mission_index"]): m for m in a["missions"]}
+        end = int(a["eol_mission"]) if a.get("eol_mission") is not None else max(by_m) + 1
+        ms = list(range(every, end, every)) if every else []
+        if at_failure and a.get("eol_mission") is not None:
+            ms.append(end)
+        rng = np.random.default_rng([seed, 9173, k])
+        ins = list(old.inspections)
+        for m in ms:
+            if m in by_m:
+                ins.append((float(m), quantity, shop_value(a["params"], by_m[m], quantity) + sd * rng.standard_normal()))
+        out[aid] = UnitEvents(failure=old.failure, removal=old.removal, inspections=ins)
+    return out
 
 
 def threshold_bound(truth, eols):
@@ -330,6 +382,15 @@ def main(argv=None) -> int:
                          "small fleet')")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),
                     help="Virkler only: override --failure-at (kept for older commands)")
+    ap.add_argument("--inspect-every", type=int, default=0, metavar="K",
+                    help="simulated fleets: add an overhaul inspection every K missions to the events file written "
+                         "from fleet_truth.json (the shop's gauge emulated from the truth; scoring side only)")
+    ap.add_argument("--inspect-quantity", default="lost_motion", choices=("lost_motion", "wear_depth"),
+                    help="what the shop measures: the output's lost motion / backlash [rad] or the flank wear depth [m]")
+    ap.add_argument("--inspect-noise", type=float, default=None, metavar="SD",
+                    help="measurement sd in SI (default: 0.1 arcmin for lost_motion, 1 um for wear_depth)")
+    ap.add_argument("--inspect-at-failure", action="store_true",
+                    help="also measure it at the teardown of every failed unit (its failure mission)")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=1,
                     help="processes for the leave-one-unit-out folds (same results as 1, in the same order)")

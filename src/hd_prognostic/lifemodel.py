@@ -1773,6 +1773,9 @@ def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, 
             pw = m.path == "power"
             if method == "ukf":
                 f = ukfs[j]
+                for ti, q, v in u.events.inspections:  # the unit's inspections since the previous record
+                    if q in m.inspections and ti <= tk and (k == 0 or ti > u.t[k - 1]):
+                        f.inspect(v, m.inspections[q], u.exposure_at(ti))
                 f.update(u.y[k], X, u.E[k])
                 z = f.sample(ns[j], rng)
                 X *= m.latent_scale()
@@ -1885,6 +1888,23 @@ class _UKF:
         C = (self.wc[:, None] * (Xs - self.x)).T @ (Z - zm)
         K = C / Sz
         self.x = self.x + K * (y - zm)
+        self.P = self.P - np.outer(K, K) * Sz
+
+    def inspect(self, v: float, qmap: dict, E: float) -> None:
+        """Unscented update with one inspection ``v = alpha + beta L(z, E) + N(0, tau^2)`` at exposure ``E`` (the
+        grid posterior's inspection term, :meth:`_Batch.logf`); the HI's AR(1) chain is not touched."""
+        if not (np.isfinite(v) and E > 0):
+            return
+        P = 0.5 * (self.P + self.P.T)
+        w, V = np.linalg.eigh(self.cc * P)
+        S = V @ np.diag(np.sqrt(np.maximum(w, 0.0)))
+        Xs = np.vstack([self.x, self.x + S.T, self.x - S.T])
+        Z = qmap["alpha"] + qmap["beta"] * np.asarray(self.model.L(Xs[:, 0], E), float)
+        zm = self.wm @ Z
+        Sz = self.wc @ (Z - zm) ** 2 + math.exp(2.0 * qmap["log_tau"])
+        C = (self.wc[:, None] * (Xs - self.x)).T @ (Z - zm)
+        K = C / Sz
+        self.x = self.x + K * (v - zm)
         self.P = self.P - np.outer(K, K) * Sz
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
