@@ -15,6 +15,10 @@ capacity <= 80 % of rated; 70 % leaves 1 failure in some training folds), Virkle
 failure-time likelihood follows each dataset's failure definition (``--failure-at auto``,
 ``lifemodel.failure_at_rule``): a recorded crossing of a known level for NASA (1.6 Ah) and Virkler (49.8 mm),
 found-failed intervals for the bag fleets.
+With ``--inspect-every K`` (and/or ``--inspect-at-failure``) the events file of a simulated fleet also carries what an
+overhaul shop measures (``--inspect-quantity lost_motion`` [rad] or ``wear_depth`` [m], from the truth plus the gauge's
+noise ``--inspect-noise``; :func:`shop_inspections`): every unit's inspections enter its fold's fit, and the held-out
+unit's own inspections up to each prediction time enter its prognosis (its failure stays unknown).
 The degradation clock of the simulated fleets is chosen by maximum likelihood on the fleet named by
 ``--dev`` (all its units) and then fixed for every other fleet: no choice is made on the scored units.
 
