@@ -131,3 +131,19 @@ def test_torque_at_the_angle_instant_keeps_the_logged_angle():
     r1 = discover_signal(with_angle_skew(ds, skew), "tau_m", ho)
     keep, st = choose_angle_timing(r0, r1, skew)
     assert not keep and "as logged" in st, st  # ... but the torque is at the angle's instant: no re-timing
+
+
+def test_a_skewed_harmonic_needs_its_rate_and_a_finite_skew():
+    from hd_twin.terms import make_term, sin_cos_pair
+
+    with pytest.raises(ValueError, match="rate"):
+        make_term("position_periodic_torque", "tau_m", [{"op": "sin", "var": "theta_m", "k": 2, "skew_s": 0.002}],
+                  [1.0])
+    with pytest.raises(ValueError, match="skew_s"):
+        make_term("position_periodic_torque", "tau_m",
+                  [{"op": "cos", "var": "theta_m", "k": 2, "skew_s": float("nan"), "rate": "omega_m"}], [1.0])
+    with pytest.raises(ValueError, match="rate"):
+        sin_cos_pair("theta_m", 2.0, skew_s=0.002)
+    # no skew: the plain pair, as every term written before
+    assert sin_cos_pair("theta_m", 2.0, skew_s=0.0) == [{"op": "sin", "var": "theta_m", "k": 2.0},
+                                                         {"op": "cos", "var": "theta_m", "k": 2.0}]

@@ -171,7 +171,7 @@ class Options:
     twist_window: str = "identify"
     # the position harmonics' timing (choose_angle_timing): "identify" (at the logged angle, or at the angle
     # re-timed by the acquisition skew identified from the speeds' lag when the fit bags' CV prefers it), "default"
-    # (at the logged angle)
+    # (at the logged angle), "retimed" (at the re-timed angle whenever a skew is identified: a diagnosis setting)
     angle_timing: str = "identify"
 
 
@@ -1954,6 +1954,8 @@ def choose_angle_timing(res_logged: "SignalResult", res_skewed: "SignalResult", 
     def names(r):
         return ", ".join(f"{t['name']}({t.get('variable')},{t.get('order')})" for t in r.terms) or "nothing"
     gain, fb, t_pair, why = _identified_against(a, b, opt)
+    if opt.angle_timing == "retimed":
+        why = []  # the diagnosis setting: used whatever the CV says (the statement still gives it)
     stats = (f"fit-block CV SSE {float(a.sum()):.4g} -> {float(b.sum()):.4g}, {gain:+.1%}, better in {fb:.0%} of the blocks, {t_pair:.1f} paired SE; "
              f"as logged: {names(res_logged)}; re-timed: {names(res_skewed)}")
     if not why:

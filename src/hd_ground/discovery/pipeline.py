@@ -98,7 +98,9 @@ def run_discovery(
     ds = dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag)
     # the acquisition skew of the torque sample after the angle's, from the identified speed lags (whether or not
     # the re-timed speeds are then used): the candidate re-timing of the position harmonics (choose_angle_timing)
-    skew = angle_skew_of(ds.speed_lags) if opt.angle_timing == "identify" else None
+    if opt.angle_timing not in ("identify", "default", "retimed"):
+        raise DiscoveryError(f"Options.angle_timing must be 'identify', 'default' or 'retimed', not {opt.angle_timing!r}")
+    skew = angle_skew_of(ds.speed_lags) if opt.angle_timing != "default" else None
 
     twin = load_twin(twin_dir) if twin_dir else None
     declared_all = list(twin.get("declared_effects", [])) if twin else None
