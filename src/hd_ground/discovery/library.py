@@ -275,7 +275,7 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
         skew = ctx.angle_skew if rate in ctx.available else 0.0
         at = (f" [{var} re-timed by the acquisition skew: {var} + s {rate}, s = {skew * 1e3:.3g} ms]" if skew else "")
 
-        def pair(times=None):
+        def pair(k, times=None, var=var, skew=skew, rate=rate):
             return sin_cos_pair(var, float(k), times, skew_s=skew, rate=rate)
         for k in orders:
             ks = _kstr(k)
@@ -291,7 +291,7 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
             for variant, times, form, pname in variants:
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, variant), fam, var, float(k),
-                    pair(times), form + at, _harm_params(pname, k),
+                    pair(k, times), form + at, _harm_params(pname, k),
                     requires=tuple({var} | ({times["var"]} if times and "var" in times else set())
                                    | ({rate} if skew else set())),
                     # i_q is the target itself (tau_m / k_t): a level of it per block would rescale the target, no
@@ -303,7 +303,7 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                 # additional group in its own family, so that it can join the plain ripple, never replace it
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, "plain"), f"{fam}:load", var, float(k),
-                    pair({"op": "abs", "var": "windup"}),
+                    pair(k, {"op": "abs", "var": "windup"}),
                     f"K a_{ks} |w| sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (load-dependent amplitude)" + at,
                     _harm_params("K_a", k), requires=(var, "windup"),
                     level_carrier={"op": "abs", "var": "windup"},
@@ -314,7 +314,7 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                 # that it can join the plain ripple); the data decide (CV + Wald) whether the law is curved
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, "plain"), f"{fam}:stiff", var, float(k),
-                    pair({"op": "pow", "var": "windup", "p": 2.0}),
+                    pair(k, {"op": "pow", "var": "windup", "p": 2.0}),
                     f"K b_{ks} w^2 sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (the ripple through the "
                     "torsion law's local stiffness)" + at,
                     _harm_params("K_b", k), requires=(var, "windup"),
