@@ -169,6 +169,10 @@ class Options:
     # the twist's output-angle smoothing (choose_twist_window): "identify" (as logged, or a quadratic
     # Savitzky-Golay smoother of 5-33 samples of theta_f when identified on the fit bags), "default" (as logged)
     twist_window: str = "identify"
+    # the position harmonics' timing (choose_angle_timing): "identify" (at the logged angle, or at the angle
+    # re-timed by the acquisition skew identified from the speeds' lag when the fit bags' CV prefers it), "default"
+    # (at the logged angle), "retimed" (at the re-timed angle whenever a skew is identified: a diagnosis setting)
+    angle_timing: str = "identify"
 
 
 @dataclass
@@ -1263,6 +1267,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         eps_range=(lo_eps, hi_eps) if eps_fit is not None else None,
         short_stroke={v: (float(np.median(sf[v])), float(np.ptp(sf[v]) / 2)) for v in ("theta_m", "theta_f")
                       if v in avail and v in excluded and np.ptp(sf[v]) > 0 and "omega_m" not in excluded},
+        angle_skew=float(getattr(ds, "angle_skew", 0.0)),
     )
     if "windup" in avail:
         wu = sf["windup"]
@@ -1904,6 +1909,64 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
                 else "no alternative lowers the CV error")
     return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms, no timing column) "
                 f"is kept ({best_txt}; {stats})")
+
+
+def angle_skew_of(lags: dict) -> float | None:
+    """The torque sample's acquisition skew after the angle's [s], from the identified speed lags
+    (``data.speed_timing``, before ``choose_speed_timing``): ``-tau`` of omega_m (the motor encoder, the finer
+    one), None when no lag is identified. Why the speeds' lag: a logger that latches the encoder at the start
+    of its period and averages the speed estimate and the current over it puts both at mid-period, i.e. the
+    logged speed leads the angle's rate by the same skew as the torque sample leads the angle (one acquisition
+    skew); whether the torque really is on the speeds' time base is decided by :func:`choose_angle_timing`."""
+    tau = (lags or {}).get("omega_m")
+    return None if tau is None or not np.isfinite(tau) or tau == 0 else -float(tau)
+
+
+def uses_angle_harmonic(terms: list[dict]) -> bool:
+    """Whether any of ``terms`` holds a harmonic (sin / cos) of an angle (theta_m, theta_f)."""
+    def walk(b):
+        if b.get("op") == "prod":
+            return any(walk(f) for f in b["factors"])
+        return b.get("op") in ("sin", "cos") and b.get("var") in ("theta_m", "theta_f")
+    return any(walk(b) for t in terms or [] for b in t["basis"])
+
+
+def choose_angle_timing(res_logged: "SignalResult", res_skewed: "SignalResult", skew_s: float,
+                        opt: Options | None = None) -> tuple[bool, str]:
+    """Position harmonics at the logged angle or at the angle re-timed by the acquisition skew, on the fit bags.
+
+    A position-periodic term (a kinematic error on Q_red, a position-periodic torque or friction on tau_m) is a
+    function of the angle at the instant the torque sample stands for. A logger that latches the encoder at the
+    start of its period and averages the current over it logs the torque half a period after the angle: at
+    speed the harmonic's phase is then off by k omega s (k its order; 76 deg in the fastest block of seed 700's
+    hysteretic-robot KE, docs/DISCOVERY_PASSES.md). ``res_skewed`` is the discovery made again with every
+    harmonic candidate taken at theta + s omega (``hd_twin.terms.retimed_angle``; s from :func:`angle_skew_of`);
+    the two *final* models are compared by their per-block leave-one-block-out CV SSE on the fit bags (the same
+    rows and blocks; ``SignalResult.cv_folds``), by the rule of the other signal readings (:func:`_identified_against`:
+    CV mean squared error lower by ``opt.min_gain`` and by at least one paired standard error of the per-block
+    gains) without the fold-majority count, as in the within-block check of :func:`select_groups`: the re-timing
+    moves an order-k harmonic by k omega s, so in the blocks where the drive creeps or stands (most blocks of a
+    slow mission) the two readings are the same model up to the re-selection's noise and split at random; the
+    count of better blocks then measures the share of fast blocks in the data, not whether the re-timing holds
+    (seed 2700 hysteretic-robot: every fit block above 18 rad/s better, by 2-23 %, the ten below 7 rad/s within
+    +-5 %; docs/DISCOVERY_PASSES.md, pass disc29). The paired standard error still asks the gains to be consistent
+    over the blocks. Returns (use the re-timed angle, a statement)."""
+    opt = opt or Options()
+    a, b = res_logged.cv_folds, res_skewed.cv_folds
+    what = f"position harmonics at the angle re-timed by the acquisition skew s = {skew_s * 1e3:.3g} ms (theta + s omega)"
+    if a is None or b is None or len(a) != len(b):
+        return False, f"angle timing ({res_logged.signal}): {what} not compared (no CV of both final models); as logged"
+
+    def names(r):
+        return ", ".join(f"{t['name']}({t.get('variable')},{t.get('order')})" for t in r.terms) or "nothing"
+    gain, fb, t_pair, why = _identified_against(a, b, opt, fold_rule=False)
+    if opt.angle_timing == "retimed":
+        why = []  # the diagnosis setting: used whatever the CV says (the statement still gives it)
+    stats = (f"fit-block CV SSE {float(a.sum()):.4g} -> {float(b.sum()):.4g}, {gain:+.1%}, better in {fb:.0%} of the blocks, {t_pair:.1f} paired SE; "
+             f"as logged: {names(res_logged)}; re-timed: {names(res_skewed)}")
+    if not why:
+        return True, f"angle timing ({res_logged.signal}): {what} identified on the fit bags ({stats}); used"
+    return False, f"angle timing ({res_logged.signal}): as logged ({what}: {'; '.join(why)}; {stats})"
 
 
 def twist_model_cv_folds(ds: Dataset, heldout: np.ndarray, terms: list[dict] | None = None,

@@ -43,6 +43,9 @@ class Dataset:
     alpha_window: dict = field(default_factory=dict)
     # the output angle's smoothing window in samples for the twist (core.choose_twist_window; 0: as logged)
     twist_window: int = 0
+    # the torque sample's skew after the angle's [s]: position harmonics are taken at theta + skew * omega
+    # (hd_twin.terms.retimed_angle; core.choose_angle_timing; 0: at the logged angle)
+    angle_skew: float = 0.0
 
     @property
     def n(self) -> int:
@@ -52,7 +55,15 @@ class Dataset:
         return Dataset({k: v[mask] for k, v in self.signals.items()}, self.bag[mask], self.block[mask],
                        self.tfrac[mask], self.t[mask], self.segment[mask], self.bag_names, self.gear_ratio,
                        self.torque_constant, list(self.notes), dict(self.speed_lags), dict(self.alpha_window),
-                       self.twist_window)
+                       self.twist_window, self.angle_skew)
+
+
+def with_angle_skew(ds: Dataset, skew_s: float) -> Dataset:
+    """``ds`` (same rows and signals) with its position harmonics to be taken at the angle re-timed by the
+    acquisition skew ``skew_s`` [s] (``Dataset.angle_skew``; the library's harmonic candidates read it)."""
+    out = ds.subset(np.ones(ds.n, bool))
+    out.angle_skew = float(skew_s)
+    return out
 
 
 def _lag_sums(omega: np.ndarray, theta: np.ndarray, t: np.ndarray, seg: np.ndarray,
@@ -293,7 +304,7 @@ def with_smoothed_twist(ds: Dataset, window: int) -> Dataset:
     sig["phi"] = sm - sig["theta_m"] / ds.gear_ratio
     sig["windup"] = -sig["phi"]
     out = Dataset(sig, ds.bag, ds.block, ds.tfrac, ds.t, ds.segment, ds.bag_names, ds.gear_ratio, ds.torque_constant,
-                  list(ds.notes), dict(ds.speed_lags), dict(ds.alpha_window), w)
+                  list(ds.notes), dict(ds.speed_lags), dict(ds.alpha_window), w, ds.angle_skew)
     return out
 
 

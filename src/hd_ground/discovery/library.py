@@ -103,6 +103,12 @@ class LibraryContext:
     windup_scale: float = 0.0  # rad, q90 of |w| (twist-side shape ranges)
     windup_noise: float = 0.0  # rad, white-noise sigma of w
     windup_dot_scale: float = 0.0  # rad/s, q90 of |w'|
+    # s, the torque sample's skew after the angle's (Dataset.angle_skew): harmonics at theta + s omega (0: as logged)
+    angle_skew: float = 0.0
+
+
+#: The rate of each angle (the re-timed angle theta + s omega of a position harmonic).
+ANGLE_RATE = {"theta_m": "omega_m", "theta_f": "omega_f"}
 
 
 _BUILDERS: list[Callable[[LibraryContext], list[Candidate]]] = []
@@ -265,6 +271,12 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
     for var, orders in ctx.orders.items():
         if var not in ctx.available:
             continue
+        rate = ANGLE_RATE.get(var)
+        skew = ctx.angle_skew if rate in ctx.available else 0.0
+        at = (f" [{var} re-timed by the acquisition skew: {var} + s {rate}, s = {skew * 1e3:.3g} ms]" if skew else "")
+
+        def pair(k, times=None, var=var, skew=skew, rate=rate):
+            return sin_cos_pair(var, float(k), times, skew_s=skew, rate=rate)
         for k in orders:
             ks = _kstr(k)
             fam = f"{var}:{ks}"
@@ -279,8 +291,9 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
             for variant, times, form, pname in variants:
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, variant), fam, var, float(k),
-                    sin_cos_pair(var, float(k), times), form, _harm_params(pname, k),
-                    requires=tuple({var} | ({times["var"]} if times and "var" in times else set())),
+                    pair(k, times), form + at, _harm_params(pname, k),
+                    requires=tuple({var} | ({times["var"]} if times and "var" in times else set())
+                                   | ({rate} if skew else set())),
                     # i_q is the target itself (tau_m / k_t): a level of it per block would rescale the target, no
                     # nuisance that can be fitted, so the i_q variant is not tested (its ripple scales with the current)
                     level_carrier=None if variant == "iq" else dict(times) if times else {"op": "const"},
@@ -290,8 +303,8 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                 # additional group in its own family, so that it can join the plain ripple, never replace it
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, "plain"), f"{fam}:load", var, float(k),
-                    sin_cos_pair(var, float(k), {"op": "abs", "var": "windup"}),
-                    f"K a_{ks} |w| sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (load-dependent amplitude)",
+                    pair(k, {"op": "abs", "var": "windup"}),
+                    f"K a_{ks} |w| sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (load-dependent amplitude)" + at,
                     _harm_params("K_a", k), requires=(var, "windup"),
                     level_carrier={"op": "abs", "var": "windup"},
                 ))
@@ -301,9 +314,9 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                 # that it can join the plain ripple); the data decide (CV + Wald) whether the law is curved
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, "plain"), f"{fam}:stiff", var, float(k),
-                    sin_cos_pair(var, float(k), {"op": "pow", "var": "windup", "p": 2.0}),
+                    pair(k, {"op": "pow", "var": "windup", "p": 2.0}),
                     f"K b_{ks} w^2 sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (the ripple through the "
-                    "torsion law's local stiffness)",
+                    "torsion law's local stiffness)" + at,
                     _harm_params("K_b", k), requires=(var, "windup"),
                     level_carrier={"op": "pow", "var": "windup", "p": 2.0},
                 ))

@@ -19,10 +19,11 @@ import numpy as np
 from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
-from .core import (DEFAULT_DECLARED, Options, SignalResult, choose_alpha_window, choose_speed_timing,
-                   choose_twist_window, confirm_twist_window, discover_signal, split_fit_heldout,
-                   static_term)
-from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions, with_smoothed_twist
+from .core import (DEFAULT_DECLARED, Options, SignalResult, angle_skew_of, choose_alpha_window, choose_angle_timing,
+                   choose_speed_timing, choose_twist_window, confirm_twist_window, discover_signal, split_fit_heldout,
+                   static_term, uses_angle_harmonic)
+from .data import (DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions, with_angle_skew,
+                   with_smoothed_twist)
 
 #: Twin declared effects that are model structure, not candidate effects of a target signal.
 STRUCTURAL = {"inertia", "linear_stiffness", "structural_damping", "mesh_friction"}
@@ -95,6 +96,11 @@ def run_discovery(
     else:
         names = [str(b) for b in bags]
     ds = dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag)
+    # the acquisition skew of the torque sample after the angle's, from the identified speed lags (whether or not
+    # the re-timed speeds are then used): the candidate re-timing of the position harmonics (choose_angle_timing)
+    if opt.angle_timing not in ("identify", "default", "retimed"):
+        raise DiscoveryError(f"Options.angle_timing must be 'identify', 'default' or 'retimed', not {opt.angle_timing!r}")
+    skew = angle_skew_of(ds.speed_lags) if opt.angle_timing != "default" else None
 
     twin = load_twin(twin_dir) if twin_dir else None
     declared_all = list(twin.get("declared_effects", [])) if twin else None
@@ -136,6 +142,7 @@ def run_discovery(
     targets = signals or ["tau_m"] + (["Q_red"] if "Q_red" in ds.signals else [])
     results: list[SignalResult] = []
     twist_window = 0  # theta_f's smoothing window for the twist of the Q_red models (0: as logged)
+    angle_skews: dict[str, float] = {}  # target -> the acquisition skew its position harmonics were taken with
     for target in targets:
         if target not in ds.signals:
             log(f"{target}: not measured in these bags; skipped")
@@ -145,6 +152,7 @@ def run_discovery(
             decl = list(DEFAULT_DECLARED[target])
         log(f"{target}: discovering (declared: {decl or 'none'}) ...")
         res = discover_signal(ds, target, ho, declared=decl, extra_terms=extra, twin_params=tparams, opt=opt)
+        ds_res = ds  # the dataset res was selected on
         if target == "Q_red" and opt.twist_window != "default":
             # the twist's output angle, smoothed or as logged, chosen on the fit bags with the model just selected
             # (core.choose_twist_window); when a smoother is identified, the Q_red discovery is made again with it
@@ -165,6 +173,19 @@ def run_discovery(
                 if keep:
                     res = res_s
                     twist_window = int(ds_q.twist_window)
+                    ds_res = ds_q
+        if skew is not None and uses_angle_harmonic(res.terms):
+            # the selected model holds a position harmonic: the discovery is made again with every harmonic taken
+            # at the angle re-timed by the acquisition skew, and the fit bags' CV of the two final models decides
+            # (core.choose_angle_timing)
+            res_a = discover_signal(with_angle_skew(ds_res, skew), target, ho, declared=decl, extra_terms=extra,
+                                    twin_params=tparams, opt=opt)
+            keep, st_ = choose_angle_timing(res, res_a, skew, opt)
+            ds.notes.append(st_)
+            log(f"note: {st_}")
+            if keep:
+                res = res_a
+                angle_skews[target] = float(skew)
         results.append(res)
         if results_out is not None:
             results_out.append(res)
@@ -180,7 +201,8 @@ def run_discovery(
         for target in [r.signal for r in results if r.identifiable]:
             decl = [r.declared_before for r in results if r.signal == target][0]
             o2 = Options(**{**asdict(opt), "angle_offset": "none"})
-            r2 = discover_signal(fit_only, target, ho2, declared=decl, extra_terms=extra, twin_params=tparams, opt=o2)
+            fo = with_angle_skew(fit_only, angle_skews[target]) if target in angle_skews else fit_only
+            r2 = discover_signal(fo, target, ho2, declared=decl, extra_terms=extra, twin_params=tparams, opt=o2)
             within[target] = {"error_before": r2.error_before, "error_after": r2.error_after,
                               "effects": [_effect_brief(e) for e in r2.effects], "heldout_frac": heldout_frac}
 
@@ -188,9 +210,12 @@ def run_discovery(
     # the twist the Q_red models were fitted with (core.choose_twist_window): theta_f's smoothing window in
     # samples, 0 as logged (the new twin version's config.json:twist_smoothing carries it in seconds)
     report["twist_window_samples"] = twist_window
+    # the acquisition skew each target's position harmonics were taken with (core.choose_angle_timing; the terms'
+    # sin / cos bases carry it as "skew_s" with their angle's "rate", so the twin evaluates them the same way)
+    report["angle_skew_s"] = dict(angle_skews)
     new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log,
                                  speed_lags=ds.speed_lags, acceleration=report["acceleration"],
-                                 twist_window=twist_window)
+                                 twist_window=twist_window, angle_skews=angle_skews)
     report["twin_out"] = str(new_dir) if new_dir else None
     if plots and results:
         from .plots import plot_result
@@ -259,7 +284,8 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
 
 def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
                        retrain: bool, missions, log, speed_lags: dict | None = None,
-                       acceleration: dict | None = None, twist_window: int = 0) -> Path | None:
+                       acceleration: dict | None = None, twist_window: int = 0,
+                       angle_skews: dict | None = None) -> Path | None:
     """Write the augmented model version (only when something was found).
 
     ``speed_lags`` (``Dataset.speed_lags``: the re-timing discovery used, empty when the speeds were used as
@@ -274,7 +300,10 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
     for the twist of the Q_red terms, ``core.choose_twist_window``; 0: as logged; samples at the first mission's
     rate) goes into ``config.json:twist_smoothing`` (:mod:`hd_twin.twistsmooth`, the window in seconds) by the
     speed timing's rule, so the twin reads the twist the Q_red terms were fitted on; ``discovery.twist_window_samples``
-    always records discovery's."""
+    always records discovery's. ``angle_skews`` (target -> the acquisition skew its position harmonics were taken
+    with, ``core.choose_angle_timing``) needs no config entry: each harmonic basis carries its ``skew_s`` and
+    ``rate`` (``hd_twin.terms.retimed_angle``, evaluated per sample, so batch and streaming twins alike take it);
+    ``discovery.angle_skew_s`` records it."""
     # the twin evaluates static terms sample by sample: a term on a pre-sliding state (a path history) goes
     # in its static form (hd_ground.discovery.core.static_term); one without such a form stays in the report
     new_terms, dropped = [], []
@@ -337,6 +366,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
     cfg["discovery"] = {"speed_timing": timing or "speeds used as logged",
                         "acceleration": dict(acceleration or {}),
                         "twist_window_samples": int(twist_window),
+                        "angle_skew_s": dict(angle_skews or {}),
                         "recalibrated": [k for k in ("T_C", "b_visc", "eps_omega") if k in params],
                         "baseline_refit": {r.signal: r.refit_baseline_params for r in results},
                         "network": "copied from the parent version, not retrained" if twin is not None else "none (physics-only model)"}
