@@ -23,7 +23,9 @@ plots and the report). Steps, for one measured target signal:
    level of its factor per block free, over the blocks where the position moves (``within_block_sse``), not only
    by levels between blocks (or, where those CV sums fail, block-robustly: the median block gains ``min_gain``
    and its within-block coefficients are identified and equal to the pooled ones, ``within_block_coefficients``,
-   a Hausman test); a backward pass drops groups that became redundant or lost
+   a Hausman test); a candidate unidentified only beside an earlier group that is unidentified beside it (a
+   confounded pair) replaces that group when every group stays identified and the CV error is lower
+   (``confounded_swap``); a backward pass drops groups that became redundant or lost
    identification. Alternatives of one family compete; one survives. A shaped group that is not identified
    in the final model closes its family and the selection is made again. A selected group's shape is fixed at
    its selection-time value while later groups are chosen; when its final shape (given all the others) moved
