@@ -96,3 +96,15 @@ def test_shaped_or_position_candidates_are_not_swapped_in(shaped):
         c.level_carrier = {"op": "const"}
     gram = _BlockGram(X, y, block)
     assert confounded_swap(gram, [0], groups, [0, 2], 1, gram.cv_sse([0, 1, 2, 3, 4, 6]), Options()) is None
+
+
+def test_a_held_out_drop_of_the_swapped_in_group_redoes_the_selection_without_it():
+    # the held-out arbiter's reselection treats a swap as an addition that displaced the replaced group
+    X, y, block, groups = _case()
+    gram = _BlockGram(X, y, block)
+    sel, trace = select_groups(gram, [0], groups, Options())
+    statements: list[str] = []
+    sel2 = core._reselect_without_heldout_drop(gram, [0], groups, Options(), sel, 1, trace, set(), set(), None, None,
+                                               statements)
+    assert sorted(sel2) == [0, 2], trace[-4:]  # without the law's family: the angle's polynomial and the ripple
+    assert any("unknown[theta_f:smooth]" in s for s in statements), statements
