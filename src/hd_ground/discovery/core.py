@@ -23,7 +23,9 @@ plots and the report). Steps, for one measured target signal:
    level of its factor per block free, over the blocks where the position moves (``within_block_sse``), not only
    by levels between blocks (or, where those CV sums fail, block-robustly: the median block gains ``min_gain``
    and its within-block coefficients are identified and equal to the pooled ones, ``within_block_coefficients``,
-   a Hausman test); a backward pass drops groups that became redundant or lost
+   a Hausman test); a candidate unidentified only beside an earlier group that is unidentified beside it (a
+   confounded pair) replaces that group when every group stays identified and the CV error is lower
+   (``confounded_swap``); a backward pass drops groups that became redundant or lost
    identification. Alternatives of one family compete; one survives. A shaped group that is not identified
    in the final model closes its family and the selection is made again. A selected group's shape is fixed at
    its selection-time value while later groups are chosen; when its final shape (given all the others) moved
@@ -713,6 +715,20 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
                 fams_used.add(cand.family)
                 continue
         if wald < _wald_threshold(len(tcols), opt.wald_sigmas):
+            swap = confounded_swap(gram, base_idx, groups, selected, gi, cur, opt)
+            if swap is not None:
+                # it is unidentified only beside an earlier group that is unidentified beside it (one effect, two
+                # readings; the earlier one entered first because this one's partner was still missing): the two
+                # readings are compared on the same footing, the better one by the fit blocks' CV stays
+                gs, e, info = swap
+                rec.update(step="swap", replaces=f"{groups[gs][0].name}[{groups[gs][0].family}]", **info)
+                trace.append(rec)
+                selected = [g for g in selected if g != gs] + [gi]
+                fams_used.add(cand.family)
+                fams_skip.clear()
+                cur_idx = _model(base_idx, groups, selected)
+                cur = e
+                continue
             # lowers the CV error, but its coefficients are not identified: leaving out one block moves them
             # by about their own size (a term soaking up what the others miss, differently in every block)
             rec["step"] = "reject (unidentified)"
@@ -760,6 +776,50 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             cur = e
             changed = True
     return selected, trace
+
+
+def confounded_swap(gram: _BlockGram, base_idx: list[int], groups, selected: list[int], gi: int, cur: np.ndarray,
+                    opt: Options) -> tuple[int, np.ndarray, dict] | None:
+    """The selected group that candidate ``gi`` (unidentified beside the model ``selected``) should replace, or None.
+
+    Forward selection keeps whichever of two confounded readings of one effect was admitted first (e.g. a cubic
+    torsion law w^3 and a smooth function of a short-stroke output angle over which the load, hence the twist,
+    varies: the angle's polynomial enters while the kinematic error is still missing, and the cubic law is then
+    unidentified beside it). A pair is confounded when, in the model holding both, neither group's coefficients are
+    identified (jackknife Wald below the ``opt.wald_sigmas`` quantile): the data cannot tell them apart beside each
+    other, so the order they came in decided. Then the model with ``gi`` in place of the earlier group ``gs`` is
+    the other reading; it replaces the current one when every group in it is identified (Wald) and its fit-block
+    CV error is lower (the criterion every forward step chooses by; Miller's sequential replacement, restricted to
+    confounded pairs). Groups with identified shapes (their own confirmation path), groups that are a function of a
+    position (their within-block check was asked against the current model) and groups a selected refinement
+    depends on are not swapped. Returns (gs, the swapped model's per-block CV SSE, trace info) or None.
+    """
+    cand = groups[gi][0]
+    if cand.shapes or cand.level_carrier is not None or not selected:
+        return None
+    joint = _model(base_idx, groups, selected + [gi])
+    refined = {groups[g][0].after for g in selected if getattr(groups[g][0], "after", None)}
+    best = None
+    for gs in selected:
+        cs = groups[gs][0]
+        if cs.shapes or cs.family in refined:
+            continue
+        ts = _tcols(groups, gs)
+        w_joint = gram.jackknife_wald(joint, ts)
+        if w_joint >= _wald_threshold(len(ts), opt.wald_sigmas):
+            continue  # identified beside the candidate: not this pair
+        rest = [g for g in selected if g != gs] + [gi]
+        idx = _model(base_idx, groups, rest)
+        if cand.positive and gram.coef(idx)[idx.index(groups[gi][1][-1])] <= 0:
+            continue
+        walds = {g: gram.jackknife_wald(idx, _tcols(groups, g)) for g in rest}
+        if any(walds[g] < _wald_threshold(len(_tcols(groups, g)), opt.wald_sigmas) for g in rest):
+            continue
+        e = gram.cv_sse(idx)
+        if e.sum() < cur.sum() and (best is None or e.sum() < best[1].sum()):
+            best = (gs, e, {"swap_gain": float((cur.sum() - e.sum()) / cur.sum()), "swap_t": _paired_t(cur, e),
+                            "replaced_wald_joint": float(w_joint), "swap_wald": float(walds[gi])})
+    return best
 
 
 def _model(base_idx: list[int], groups, sel: list[int]) -> list[int]:
@@ -1630,11 +1690,13 @@ def _reselect_without_heldout_drop(gram, base_idx, groups, opt, sel, gi, trace, 
     The held-out data only veto, as before; what enters is chosen by the fit blocks' CV."""
     cand = groups[gi][0]
     label = f"{cand.name}[{cand.family}]"
-    added = [i for i, r in enumerate(trace) if r.get("step") == "add" and r.get("candidate") == label]
+    added = [i for i, r in enumerate(trace) if r.get("step") in ("add", "swap") and r.get("candidate") == label]
     if not added:
         return sel
     displaced = [r for r in trace[added[-1] + 1:] if r.get("step", "").startswith("drop (unidentified)")
                  or r.get("step") == "drop"]
+    if trace[added[-1]].get("step") == "swap":  # it entered in place of a confounded group
+        displaced.insert(0, {"candidate": trace[added[-1]]["replaces"]})
     if not displaced:
         return sel
     held_closed.add(cand.family)
