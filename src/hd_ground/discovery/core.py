@@ -995,9 +995,9 @@ def identify_width_filtered(sig: "StateSignals", t_full: np.ndarray, segment_ful
 
     On the raw columns the smoothed acceleration's error J (alpha_true - K * alpha_true) sits where the true
     acceleration changes fast, and the friction's own flip through zero speed is such a place (a step of 2 T_C / J
-    in the acceleration): the smoothed acceleration spreads it over the derivative window and a wider transition
-    takes part of it up (smooth-cubic at seed 2700: 1.68 rad/s on the raw columns, 1.58 filtered, 1.57 the
-    truth). ``matrix_of(eps, table)``: the model's columns (``names``) on ``table`` at width eps;
+    in the acceleration): the smoothed acceleration spreads it over the derivative window and the width takes part
+    of it up (smooth-cubic at seed 2700: 1.68 rad/s on the raw columns, 1.60 filtered, 1.57 the truth;
+    tests/ground/test_discovery_width_filtered.py: 0.454 raw, 0.501 filtered, 0.5 the truth). ``matrix_of(eps, table)``: the model's columns (``names``) on ``table`` at width eps;
     ``derivative_cols``: which of them are smoothed derivatives (not filtered again); the rest as
     :func:`identify_presliding_filtered`. Returns the SeparableFit (CV profile over ``eps_range``, block jackknife)
     of the filtered equation; its ``cv_rmse`` is the filtered equation's."""
