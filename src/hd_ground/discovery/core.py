@@ -168,6 +168,10 @@ class Options:
     # as the acceleration is, with the state's timing against the torque profiled jointly) or "raw" (on the raw
     # columns, the ninth pass's behaviour)
     presliding_fit: str = "filtered"
+    # the tanh transition width's profile (identify_width_filtered; baseline and its second look given the selected
+    # effects): "filtered" (on the torque balance filtered as the acceleration is) or "raw" (on the raw columns, the
+    # behaviour before the twenty-third pass)
+    width_fit: str = "filtered"
     # the twist's output-angle smoothing (choose_twist_window): "identify" (as logged, or a quadratic
     # Savitzky-Golay smoother of 5-33 samples of theta_f when identified on the fit bags), "default" (as logged)
     twist_window: str = "identify"
@@ -963,7 +967,8 @@ def moved_shapes(groups, sel: list[int], at_sel: dict) -> dict[int, list[str]]:
 
 
 def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms, twin_params, keep, X_all,
-                      base_idx, groups, sel, eps0: float, rng: tuple[float, float]) -> tuple | None:
+                      base_idx, groups, sel, eps0: float, rng: tuple[float, float],
+                      filtered: tuple | None = None) -> tuple | None:
     """The friction transition width identified again given the selected groups (CV profile + jackknife).
 
     The width is one parameter of every term on the friction direction: the selected groups' tanh(omega_m /
@@ -973,7 +978,10 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
     times the noise floor is then in the residual and blurs the profile. Given the selected groups' columns
     the width is searched again over the same range. Returns (eps, sd, note, eps0) when it is identified and
     differs from ``eps0`` by more than its own SD, else None. Skipped when a selected group re-identifies
-    the width itself (it replaces the baseline's Coulomb column, e.g. Stribeck)."""
+    the width itself (it replaces the baseline's Coulomb column, e.g. Stribeck). ``filtered``: (t_full,
+    segment_full, window_s, speed-noise sigma): the profile is then made on the torque balance filtered as the
+    acceleration is (:func:`identify_width_filtered`, the baseline's first profile's equation), unless its width is
+    within ``WIDTH_RESOLVED_SIGMAS`` speed-noise sigmas (then on the raw columns, as the baseline's)."""
     if any(getattr(groups[gi][0], "replace_idx", ()) for gi in sel):
         return None
     cols_sel = [c for gi in sel for c in groups[gi][1]]
@@ -989,12 +997,22 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
             return {**b, "eps": float(eps)}
         return b
 
-    def design(sh):
-        Xb = _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, sh["eps"], twin_params)[0],
-                              s_rows)[:, keep]
-        Xg = [basis_matrix([with_eps(b, sh["eps"]) for b in groups[gi][0].basis], s_rows) for gi in sel]
+    def matrix(eps, table):
+        Xb = _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, eps, twin_params)[0],
+                              table)[:, keep]
+        Xg = [basis_matrix([with_eps(b, eps) for b in groups[gi][0].basis], table) for gi in sel]
         return np.column_stack([Xb] + Xg)
-    f = fit_separable(y[srows], design, names, block[srows], [Shape("eps", rng[0], rng[1], log=True, n_grid=12)])
+    f = None
+    if filtered is not None:
+        deriv = [c.term is None and _is_derivative_basis(c.basis) for c in (bc[j] for j in keep)] + [
+            _is_derivative_basis(b) for gi in sel for b in groups[gi][0].basis]
+        f = identify_width_filtered(sig, filtered[0], filtered[1], filtered[2], target, srows, block[srows], matrix,
+                                    names, deriv, rng)
+        if f.shape["eps"] < WIDTH_RESOLVED_SIGMAS * filtered[3]:
+            f = None  # not resolved beyond the speed noise: the raw columns' profile, as the baseline's
+    if f is None:
+        f = fit_separable(y[srows], lambda sh: matrix(sh["eps"], s_rows), names, block[srows],
+                          [Shape("eps", rng[0], rng[1], log=True, n_grid=12)])
     e1, sd1 = float(f.shape["eps"]), float(f.shape_sd["eps"])
     if not f.identified["eps"] or abs(e1 - eps0) <= sd1:
         return None
@@ -1035,6 +1053,38 @@ def identify_presliding_filtered(sig: "StateSignals", t_full: np.ndarray, segmen
     why = "; ".join(n for n in f.notes if n.startswith("shift")) or f"jackknife SD {sd:.2g} samples"
     f = fit_separable(yF, design, names, block, [d_shape])
     return f, 0.0, f"; on the torque balance filtered as the acceleration is; the state's timing not identified ({why})"
+
+
+#: A friction transition width below this many speed-noise sigmas is not resolved beyond the measurement noise (the
+#: statement "consistent with a hard sign"); then the width is the raw columns' profile (identify_width_filtered).
+WIDTH_RESOLVED_SIGMAS = 2.0
+
+
+def identify_width_filtered(sig: "StateSignals", t_full: np.ndarray, segment_full: np.ndarray, window_s: float,
+                            target: str, srows: np.ndarray, block: np.ndarray, matrix_of, names: list[str],
+                            derivative_cols: list[bool], eps_range: tuple[float, float]):
+    """The friction transition width eps of tanh(omega_m / eps) profiled on the torque balance filtered as the
+    acceleration is (:mod:`.prefilter`, the pre-sliding distance's equation; issue 10, twenty-third pass).
+
+    On the raw columns the smoothed acceleration's error J (alpha_true - K * alpha_true) sits where the true
+    acceleration changes fast, and the friction's own flip through zero speed is such a place (a step of 2 T_C / J
+    in the acceleration): the smoothed acceleration spreads it over the derivative window and the width takes part
+    of it up (smooth-cubic at seed 2700: 1.68 rad/s on the raw columns, 1.60 filtered, 1.57 the truth;
+    tests/ground/test_discovery_width_filtered.py: 0.454 raw, 0.501 filtered, 0.5 the truth). ``matrix_of(eps, table)``: the model's columns (``names``) on ``table`` at width eps;
+    ``derivative_cols``: which of them are smoothed derivatives (not filtered again); the rest as
+    :func:`identify_presliding_filtered`. Returns the SeparableFit (CV profile over ``eps_range``, block jackknife)
+    of the filtered equation; its ``cv_rmse`` is the filtered equation's.
+
+    Used only where the width it finds is resolved beyond the speed noise (>= ``WIDTH_RESOLVED_SIGMAS`` sigmas):
+    below, the transition is a near-hard sign blurred by the noise of the speed every prediction reads, and the raw
+    columns' profile sets that blur (the default family, hard sign 0.02 rad/s, speed-noise sigma 0.011: filtered
+    0.019, raw 0.027; the raw width predicts the held-out bag 3-4 % better)."""
+    full_sig = StateSignals(sig._source[0], sig._source, np.arange(len(t_full)))
+    rows = sig._rows[srows]
+    yF = smooth_like_derivative(full_sig[target], t_full, segment_full, window_s)[rows]
+    design = filtered_design(lambda sh: matrix_of(sh["eps"], full_sig), derivative_cols, t_full, segment_full,
+                             window_s, rows)
+    return fit_separable(yF, design, names, block, [Shape("eps", eps_range[0], eps_range[1], log=True, n_grid=12)])
 
 
 def _is_derivative_basis(b: dict | None) -> bool:
@@ -1126,6 +1176,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     opt = opt or Options()
     if opt.presliding_fit not in ("filtered", "raw"):
         raise DiscoveryError(f"Options.presliding_fit must be 'filtered' or 'raw', not {opt.presliding_fit!r}")
+    if opt.width_fit not in ("filtered", "raw"):
+        raise DiscoveryError(f"Options.width_fit must be 'filtered' or 'raw', not {opt.width_fit!r}")
     ds0, heldout0 = ds, heldout
     declared = list(DEFAULT_DECLARED.get(target, []) if declared is None else declared)
     extra_terms = list(extra_terms or [])
@@ -1172,6 +1224,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     # 1. baseline: the friction transition through zero speed, tanh(omega_m / eps), with eps identified by
     # the cross-validated profile search (hd_twin.identify); never a constant of one simulator
     eps_fit = None
+    width_note = ""
+    alpha_win = float(ds.alpha_window.get("window_s", DEFAULT_ALPHA_WINDOW_S))
     sgn_eps = max(sig_w, 1e-4 * scale, 1e-6)
     lo_eps = hi_eps = sgn_eps
     if target == "tau_m" and "omega_m" in avail and "bias" not in excluded and any(
@@ -1185,8 +1239,29 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             return _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, sh["eps"], twin_params)[0],
                                     s_rows)
         bc = baseline_columns(target, avail, declared, extra_terms, 1.0, twin_params)[0]
-        eps_fit = fit_separable(y[srows], design_eps, [c.param for c in bc], ds.block[srows],
-                                [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)])
+        if opt.width_fit == "filtered":
+            # profiled on the torque balance filtered as the acceleration is (the raw columns' smoothed-acceleration
+            # error at the friction's own flip widens the transition); the raw columns' CV error at that width is
+            # what the law (tanh or pre-sliding state) is chosen on, as for the state
+            eps_fit = identify_width_filtered(
+                sig, ds0.t, ds0.segment, alpha_win, target, srows, ds.block[srows],
+                lambda eps, table: _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, eps,
+                                                                     twin_params)[0], table),
+                [c.param for c in bc], [c.term is None and _is_derivative_basis(c.basis) for c in bc], (lo_eps, hi_eps))
+            if eps_fit.shape["eps"] >= WIDTH_RESOLVED_SIGMAS * sig_w:
+                eps_fit.cv_rmse = fit_separable(y[srows], lambda _: design_eps(eps_fit.shape), [c.param for c in bc],
+                                                ds.block[srows], [], jackknife=False).cv_rmse
+            else:
+                # a transition not resolved beyond the speed noise: the width then describes how the noisy speed
+                # blurs a near-hard sign, a property of the speed every prediction reads, set by the raw columns
+                eps_unres = float(eps_fit.shape["eps"])
+                eps_fit = fit_separable(y[srows], design_eps, [c.param for c in bc], ds.block[srows],
+                                        [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)])
+                width_note = (f"; on the filtered equation {eps_unres:.3g} rad/s, within {WIDTH_RESOLVED_SIGMAS:g}x "
+                              "the speed-noise sigma (not resolved): the raw columns' profile used")
+        else:
+            eps_fit = fit_separable(y[srows], design_eps, [c.param for c in bc], ds.block[srows],
+                                    [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)])
         sgn_eps = eps_fit.shape["eps"]
         if transition_width is not None:
             sgn_eps = float(transition_width[0])
@@ -1197,9 +1272,10 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         statements.append(
             f"friction transition through zero speed: tanh(omega_m / eps), eps = {sgn_eps:.3g} +- "
             f"{eps_fit.shape_sd['eps']:.2g} rad/s (cross-validated profile search over {lo_eps:.3g}..{hi_eps:.3g} "
-            "rad/s, block jackknife)"
+            "rad/s, block jackknife" + (width_note or ("; on the torque balance filtered as the acceleration is"
+                                                       if opt.width_fit == "filtered" else "")) + ")"
             + ("" if eps_fit.identified["eps"] else "; not identified: " + "; ".join(eps_fit.notes)))
-        if sgn_eps < 2 * sig_w:
+        if sgn_eps < WIDTH_RESOLVED_SIGMAS * sig_w:
             statements.append(f"eps is within 2x the speed-noise sigma {sig_w:.3g} rad/s: the transition is not "
                               "resolved beyond the measurement noise (consistent with a hard sign)")
     # the same transition as a rate-independent (Dahl / LuGre pre-sliding) state of the motor angle: the
@@ -1208,7 +1284,6 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     # distance is identified and it lowers the CV error by ``min_gain`` (the selection's own rule)
     fric = sgn_eps
     ps_fit = None
-    alpha_win = float(ds.alpha_window.get("window_s", DEFAULT_ALPHA_WINDOW_S))
     d_lo = d_hi = 0.0
     if eps_fit is not None and "theta_m" in avail:
         d_lo, d_hi = presliding_range(sf["theta_m"], sf["omega_m"], ds.segment[fit])
@@ -1513,7 +1588,9 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 f"SSE ({float(cv_new.sum()):.4g} vs {float(cv_old.sum()):.4g}); the first selection kept")
     if transition_width is None and eps_fit is not None and not isinstance(fric, dict) and sel:
         rew = _reidentify_width(y, sig, srows, ds.block, target, avail, declared, extra_terms, twin_params, keep,
-                                X_all, base_idx, groups, sel, sgn_eps, (lo_eps, hi_eps))
+                                X_all, base_idx, groups, sel, sgn_eps, (lo_eps, hi_eps),
+                                filtered=(ds0.t, ds0.segment, alpha_win, sig_w) if opt.width_fit == "filtered"
+                                else None)
         if rew is not None:
             # the width was first identified with the undeclared effects still in the residual; given the
             # selected groups it is identified again, and candidates built on it are selected again
