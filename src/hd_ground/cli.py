@@ -41,6 +41,13 @@ def register(subparsers) -> None:
                         "and the inertia torque's timing; the 20 ms default kept unless the tau_m baseline's CV error "
                         "drops by --min-gain in most blocks, beyond one paired SE, at a window inside the range), "
                         "'timing' (20 ms, the timing column only) or 'default' (20 ms, nothing tried)")
+    p.add_argument("--angle-timing", choices=["identify", "default", "retimed"], default="identify",
+                   help="position harmonics at the logged angle or at the angle re-timed by the acquisition skew "
+                        "identified from the speeds' lag: identified on the fit bags' CV ('identify'), 'default' (as "
+                        "logged) or 'retimed' (whenever a skew is identified; diagnosis)")
+    p.add_argument("--width-fit", choices=["filtered", "raw"], default="filtered",
+                   help="the tanh friction width's profile: on the torque balance filtered as the acceleration is "
+                        "(where resolved beyond the speed noise) or on the raw columns")
     p.add_argument("--wald-sigmas", type=float, default=3.0,
                    help="an effect's coefficients must lie this many leave-one-block-out standard errors from zero "
                         "(identified) to be added")
@@ -66,7 +73,8 @@ def _discover(args: argparse.Namespace) -> int:
         print("hdphm discover: --blocks must be >= 2 and --max-effects >= 0", file=sys.stderr)
         return 2
     opt = Options(min_gain=args.min_gain, max_effects=args.max_effects, wald_sigmas=args.wald_sigmas,
-                  angle_offset=args.angle_offset, calib_frac=args.calib_frac, alpha_window=args.alpha_window)
+                  angle_offset=args.angle_offset, calib_frac=args.calib_frac, alpha_window=args.alpha_window,
+                  angle_timing=args.angle_timing, width_fit=args.width_fit)
     try:
         heldout = args.heldout
         if args.fit_files:

@@ -147,3 +147,12 @@ def test_a_skewed_harmonic_needs_its_rate_and_a_finite_skew():
     # no skew: the plain pair, as every term written before
     assert sin_cos_pair("theta_m", 2.0, skew_s=0.0) == [{"op": "sin", "var": "theta_m", "k": 2.0},
                                                          {"op": "cos", "var": "theta_m", "k": 2.0}]
+
+
+def test_a_lagging_speed_gives_no_angle_skew():
+    # an averaging logger's speed leads the angle's rate (tau < 0): the torque sample's skew is -tau; a speed that
+    # lags it is a filtered estimate, whose lag says nothing about the torque's instant (harivin: 2.72 ms)
+    assert angle_skew_of({"omega_m": -0.002375}) == pytest.approx(0.002375)
+    assert angle_skew_of({"omega_m": 0.00272}) is None
+    assert angle_skew_of({"omega_m": 0.0}) is None and angle_skew_of({}) is None
+    assert angle_skew_of({"omega_m": float("nan")}) is None
