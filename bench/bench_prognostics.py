@@ -30,12 +30,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from hd_sim.plant import ARCMIN, wear_backlash
 
 KEYS = ("frac_in_cone_lambda_ge_0.5", "coverage_p5_p95", "cra", "crps_mean")
 
@@ -230,7 +231,6 @@ def sim_fleet(name, fleet_dir, out, exposure, args):
     return res, exposure
 
 
-ARCMIN = np.pi / (180.0 * 60.0)
 #: quantity -> (unit, default measurement sd in SI): the shop's gauge resolution / repeatability
 #: (src/hd_prognostic/README.md, "What inspections at overhaul buy"): lost motion 0.1 arcmin (a lost-motion
 #: test rig's repeatability; its encoder resolves ~1 arcsec), wear depth 1 um (tooth-profile CMM)
@@ -246,8 +246,7 @@ def shop_value(params: dict, mission: dict, quantity: str) -> float:
     if quantity == "wear_depth":
         return 0.5 * (hp + hm)
     if quantity == "lost_motion":
-        return max(0.0, hp + hm - 2.0 * float(params["delta_0"])) / math.cos(float(params["alpha_p"])) \
-            / float(params["r_m"])
+        return wear_backlash(params, hp, hm) / float(params["r_m"])
     raise ValueError(f"inspection quantity {quantity!r} is not one of {', '.join(SHOP_QUANTITIES)}")
 
 

@@ -1851,14 +1851,27 @@ class _UKF:
             return np.exp(z) * X
         return self.model.L(z, E)
 
+    def _sigma_points(self) -> np.ndarray:
+        """The 2n + 1 sigma points (rows) of the state (z, a) about its mean (merwe_weights' scaling)."""
+        P = 0.5 * (self.P + self.P.T)
+        w, V = np.linalg.eigh(self.cc * P)
+        S = V @ np.diag(np.sqrt(np.maximum(w, 0.0)))
+        return np.vstack([self.x, self.x + S.T, self.x - S.T])
+
+    def _correct(self, Xs: np.ndarray, Z: np.ndarray, r2: float, meas: float) -> None:
+        """The unscented measurement update: sigma points ``Xs`` predicted as ``Z``, measurement variance ``r2``."""
+        zm = self.wm @ Z
+        Sz = self.wc @ (Z - zm) ** 2 + r2
+        C = (self.wc[:, None] * (Xs - self.x)).T @ (Z - zm)
+        K = C / Sz
+        self.x = self.x + K * (meas - zm)
+        self.P = self.P - np.outer(K, K) * Sz
+
     def update(self, y: float, X: float, E: float | None = None) -> None:
         if not np.isfinite(y):
             self.prev = None
             return
-        P = 0.5 * (self.P + self.P.T)
-        w, V = np.linalg.eigh(self.cc * P)
-        S = V @ np.diag(np.sqrt(np.maximum(w, 0.0)))
-        Xs = np.vstack([self.x, self.x + S.T, self.x - S.T])
+        Xs = self._sigma_points()
         rho = self.rho
         pw = self.model.path == "power" or E is None
         kap = self.kap
@@ -1882,30 +1895,16 @@ class _UKF:
                                           self.c * (self._lat(Xs[:, 0], X, E) - rho * self._lat(Xs[:, 0], Xp, Ep)))
             r2, meas = self.sig ** 2, y - rho * yp
         self.prev = (y, X, E)
-        y = meas
-        zm = self.wm @ Z
-        Sz = self.wc @ (Z - zm) ** 2 + r2
-        C = (self.wc[:, None] * (Xs - self.x)).T @ (Z - zm)
-        K = C / Sz
-        self.x = self.x + K * (y - zm)
-        self.P = self.P - np.outer(K, K) * Sz
+        self._correct(Xs, Z, r2, meas)
 
     def inspect(self, v: float, qmap: dict, E: float) -> None:
         """Unscented update with one inspection ``v = alpha + beta L(z, E) + N(0, tau^2)`` at exposure ``E`` (the
         grid posterior's inspection term, :meth:`_Batch.logf`); the HI's AR(1) chain is not touched."""
         if not (np.isfinite(v) and E > 0):
             return
-        P = 0.5 * (self.P + self.P.T)
-        w, V = np.linalg.eigh(self.cc * P)
-        S = V @ np.diag(np.sqrt(np.maximum(w, 0.0)))
-        Xs = np.vstack([self.x, self.x + S.T, self.x - S.T])
+        Xs = self._sigma_points()
         Z = qmap["alpha"] + qmap["beta"] * np.asarray(self.model.L(Xs[:, 0], E), float)
-        zm = self.wm @ Z
-        Sz = self.wc @ (Z - zm) ** 2 + math.exp(2.0 * qmap["log_tau"])
-        C = (self.wc[:, None] * (Xs - self.x)).T @ (Z - zm)
-        K = C / Sz
-        self.x = self.x + K * (v - zm)
-        self.P = self.P - np.outer(K, K) * Sz
+        self._correct(Xs, Z, math.exp(2.0 * qmap["log_tau"]), v)
 
     def sample(self, n: int, rng: np.random.Generator) -> np.ndarray:
         sd = math.sqrt(max(self.P[0, 0], 0.0))

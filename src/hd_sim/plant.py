@@ -31,6 +31,13 @@ def _eff(params: Mapping[str, Any], effects: EffectSet, name: str, key: str) -> 
     return v
 
 
+def wear_backlash(params: Mapping[str, Any], h_plus: float, h_minus: float) -> float:
+    """The mesh's backlash gap from flank wear [m, along the line of action's tangent]: ``max(0, h+ + h- -
+    2 delta_0) / cos(alpha_p)`` (PHYSICS.md 4: it opens once the flexspline's interference preload delta_0 is worn
+    through); divided by r_m it is the lost motion at the output [rad]."""
+    return max(0.0, h_plus + h_minus - 2.0 * float(params["delta_0"])) / math.cos(float(params["alpha_p"]))
+
+
 def bouc_wen_width(z_max: float, A: float, k_FS: float, F_pk: float) -> float:
     """Zero-force loop width [m of y_FS] of k_FS y + z (Bouc-Wen n = 1, beta = gamma) cycled to +-F_pk.
 
@@ -138,7 +145,7 @@ def derived(params: Mapping[str, Any], effects: EffectSet, health: Mapping[str, 
     k_FS_eff = k_FS * (1.0 - fs_loss)
     j = 0.0
     if on("backlash"):
-        j = max(0.0, (hp + hm - 2.0 * p["delta_0"]) if wear else 0.0) / math.cos(p["alpha_p"])
+        j = wear_backlash(p, hp, hm) if wear else 0.0
         j += effects.p("backlash", "j0")
     w_bl = max(effects.p("backlash", "smooth") * j, 1e-9)
     if tors_choice == "deadzone":

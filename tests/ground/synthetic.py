@@ -1,6 +1,7 @@
 """Synthetic discovery datasets shared by the tests (numpy only, no hd_sim).
 
-``stribeck_design``: the Stribeck friction's columns for a shape search; ``dataset``: per-bag columns as a discovery Dataset, five blocks per bag, the last bag held out. ``torsion_plant``,
+``stribeck_design``: the Stribeck friction's columns for a shape search; ``log_as_drive``: a fine-step motor
+simulation logged as a drive logs it; ``dataset``: per-bag columns as a discovery Dataset, five blocks per bag, the last bag held out. ``torsion_plant``,
 the twist-side Q_red plant: four 8 s bags at 500 Hz (the last held out, five blocks each): a motor sweep theta_m = 40 sin(2 pi f_i t), a wind-up
 w of a load sweep plus a 1.7 Hz ripple, and Q_red = spring(x) + 50 w' + N(0, 3 N*m) with x = w - e(theta_m) the
 spring's own deflection (e the position error inside it, none by default).
@@ -9,6 +10,7 @@ spring's own deflection (e the position error inside it, none by default).
 import numpy as np
 
 from hd_ground.discovery.data import Dataset
+from hd_twin.speedtiming import sg2_derivative
 
 FS, T_BAG, N_BAGS, N = 500.0, 8.0, 4, 80.0
 
@@ -23,6 +25,18 @@ def dataset(cols: dict, t: np.ndarray, ratio: float = N) -> tuple[Dataset, np.nd
     block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
     ds = Dataset(sig, bag, block, frac, np.tile(t, n_bags), bag.copy(), [f"bag{i}" for i in range(n_bags)], ratio, 0.1)
     return ds, bag == n_bags - 1
+
+
+def log_as_drive(th: np.ndarray, w: np.ndarray, tau: np.ndarray, fs: float, sub: int, rng) -> dict:
+    """A motor simulated at ``sub`` fine steps per logging period (angle ``th``, speed ``w``, torque ``tau``) logged
+    at ``fs`` as a drive logs it: angle and speed sampled at the period's start (speed noise 0.005 rad/s), the torque
+    as its mean over the period (noise 0.02 N*m), the acceleration as the 20 ms Savitzky-Golay derivative of the
+    logged speed. One bag's columns (theta_m, omega_m, alpha_m, tau_m); ``rng`` draws the speed noise first."""
+    n = len(w) // sub
+    t = np.arange(n) / fs
+    w_log = w[::sub] + rng.normal(0, 0.005, n)
+    return {"theta_m": th[::sub], "omega_m": w_log, "alpha_m": sg2_derivative(w_log, t, np.zeros(n, int), 0.02),
+            "tau_m": tau.reshape(n, sub).mean(1) + rng.normal(0, 0.02, n)}
 
 
 def torsion_plant(spring, position_error=None, seed: int = 1) -> tuple[Dataset, np.ndarray]:

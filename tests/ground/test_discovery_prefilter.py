@@ -18,7 +18,7 @@ from hd_ground.discovery.prefilter import implied_kernel, shift_samples, smooth_
 from hd_twin.identify import presliding_state
 from hd_twin.speedtiming import sg2_derivative
 
-from .synthetic import dataset
+from .synthetic import dataset, log_as_drive
 
 FS, SUB, T_BAG, N_BAGS = 500.0, 40, 6.0, 4
 J, T_C, B, D_TRUE = 0.01, 1.0, 0.01, 4e-4
@@ -86,10 +86,7 @@ def _hard_reversal_plant(t_bag: float, stribeck: bool, d_true: float = D_TRUE,
         th = np.cumsum(w) / (FS * SUB)
         level = T_C + (t_s - T_C) * np.exp(-(w / OMEGA_S) ** 2) if stribeck else T_C
         tau = J * np.gradient(w, tf) + level * presliding_state(th, d_true) + B * w
-        w_log = w[::SUB] + rng.normal(0, 0.005, n)
-        for k, v in (("theta_m", th[::SUB]), ("omega_m", w_log),
-                     ("alpha_m", sg2_derivative(w_log, t, np.zeros(n, int), 0.02)),
-                     ("tau_m", tau.reshape(n, SUB).mean(1) + rng.normal(0, 0.02, n))):
+        for k, v in log_as_drive(th, w, tau, FS, SUB, rng).items():
             cols[k].append(v)
     return dataset(cols, t, ratio=100.0)
 

@@ -14,9 +14,8 @@ import pytest
 
 from hd_ground.discovery.core import DiscoveryError, Options, discover_signal
 from hd_ground.discovery.data import Dataset
-from hd_twin.speedtiming import sg2_derivative
 
-from .synthetic import dataset
+from .synthetic import dataset, log_as_drive
 
 FS, SUB, T_BAG, N_BAGS = 500.0, 40, 6.0, 4
 J, T_C, B, EPS_TRUE = 0.01, 1.0, 0.01, 0.5
@@ -35,10 +34,7 @@ def _tanh_plant(seed: int = 0) -> tuple[Dataset, np.ndarray]:
         w = 3.0 * np.sin(2 * np.pi * f1 * tf) + a2 * np.tanh(np.sin(2 * np.pi * f2 * tf) / (0.05 + 0.05 * (i % 2)))
         th = np.cumsum(w) / (FS * SUB)
         tau = J * np.gradient(w, tf) + T_C * np.tanh(w / EPS_TRUE) + B * w
-        w_log = w[::SUB] + rng.normal(0, 0.005, n)
-        for k, v in (("theta_m", th[::SUB]), ("omega_m", w_log),
-                     ("alpha_m", sg2_derivative(w_log, t, np.zeros(n, int), 0.02)),
-                     ("tau_m", tau.reshape(n, SUB).mean(1) + rng.normal(0, 0.02, n))):
+        for k, v in log_as_drive(th, w, tau, FS, SUB, rng).items():
             cols[k].append(v)
     return dataset(cols, t, ratio=100.0)
 

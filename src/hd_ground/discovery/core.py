@@ -1243,23 +1243,22 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             # profiled on the torque balance filtered as the acceleration is (the raw columns' smoothed-acceleration
             # error at the friction's own flip widens the transition); the raw columns' CV error at that width is
             # what the law (tanh or pre-sliding state) is chosen on, as for the state
-            eps_fit = identify_width_filtered(
+            f = identify_width_filtered(
                 sig, ds0.t, ds0.segment, alpha_win, target, srows, ds.block[srows],
                 lambda eps, table: _baseline_matrix(baseline_columns(target, avail, declared, extra_terms, eps,
                                                                      twin_params)[0], table),
                 [c.param for c in bc], [c.term is None and _is_derivative_basis(c.basis) for c in bc], (lo_eps, hi_eps))
-            if eps_fit.shape["eps"] >= WIDTH_RESOLVED_SIGMAS * sig_w:
-                eps_fit.cv_rmse = fit_separable(y[srows], lambda _: design_eps(eps_fit.shape), [c.param for c in bc],
-                                                ds.block[srows], [], jackknife=False).cv_rmse
+            if f.shape["eps"] >= WIDTH_RESOLVED_SIGMAS * sig_w:
+                f.cv_rmse = fit_separable(y[srows], lambda _: design_eps(f.shape), [c.param for c in bc],
+                                          ds.block[srows], [], jackknife=False).cv_rmse
+                eps_fit = f
             else:
                 # a transition not resolved beyond the speed noise: the width then describes how the noisy speed
                 # blurs a near-hard sign, a property of the speed every prediction reads, set by the raw columns
-                eps_unres = float(eps_fit.shape["eps"])
-                eps_fit = fit_separable(y[srows], design_eps, [c.param for c in bc], ds.block[srows],
-                                        [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)])
-                width_note = (f"; on the filtered equation {eps_unres:.3g} rad/s, within {WIDTH_RESOLVED_SIGMAS:g}x "
-                              "the speed-noise sigma (not resolved): the raw columns' profile used")
-        else:
+                width_note = (f"; on the filtered equation {float(f.shape['eps']):.3g} rad/s, within "
+                              f"{WIDTH_RESOLVED_SIGMAS:g}x the speed-noise sigma (not resolved): the raw columns' "
+                              "profile used")
+        if eps_fit is None:
             eps_fit = fit_separable(y[srows], design_eps, [c.param for c in bc], ds.block[srows],
                                     [Shape("eps", lo_eps, hi_eps, log=True, n_grid=12)])
         sgn_eps = eps_fit.shape["eps"]

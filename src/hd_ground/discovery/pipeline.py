@@ -102,7 +102,7 @@ def run_discovery(
         raise DiscoveryError(f"Options.angle_timing must be 'identify', 'default' or 'retimed', not {opt.angle_timing!r}")
     skew = angle_skew_of(ds.speed_lags) if opt.angle_timing != "default" else None
     lag_m = (ds.speed_lags or {}).get("omega_m")
-    if opt.angle_timing != "default" and lag_m is not None and np.isfinite(lag_m) and lag_m > 0:
+    if opt.angle_timing != "default" and skew is None and lag_m is not None and lag_m > 0:  # a lagging speed
         ds.notes.append(f"angle timing: the logged omega_m lags the angle's rate by {lag_m * 1e3:.3g} ms (a filtered "
                         "speed estimate, not an acquisition skew of the torque sample): position harmonics taken at "
                         "the logged angle, no re-timing tried")
