@@ -6,17 +6,17 @@ Two parts, diagnosis only (nothing here feeds an estimator):
 
 ``python bench/diag_block_leverage.py CASE_DIR [--twist W] [--test w3|keK|pdsK|ksK] [--model ke2,...]``
     Rebuilds the model (baseline K w + c w' + alpha_f, the ``--model`` groups, default ke2, and the tested group,
-    default w3; keK: sin/cos K theta_m, pdsK: w times them, ksK: w^2 times them,
-    the library's ``:stiff`` variant) on the case's fit blocks with theta_f smoothed over W samples (discover's window, default 17), prints
-    per block: its bag, its share of the tested group's partial information (FWL: the group's columns with the others
-    projected out), the largest eigenvalue of its hat matrix H_bb, q99 |w|, the group's coefficient estimated from
-    that block alone with the others pooled (FWL), the same with every coefficient the block's own, the
-    leave-one-block-out estimate and the block's CV SSE; then the group's identification by each test:
-    jackknife Wald (discover's rule, ``core._BlockGram.jackknife_wald``), cluster sandwich CR0 / CR1, the
-    leverage-corrected CR2 (Bell & McCaffrey 2002) with its Bell-McCaffrey degrees of freedom and the t^2 / F
-    quantile they ask at 3 sigma, CR3 (the jackknife's linearisation), the restricted-score block sign-flip test
-    (wild-cluster-restricted in randomization form) and the block sign-flip test on the blocks' own estimates (Canay,
-    Romano & Shaikh 2017: exact under independent blocks with symmetric estimates).
+    default w3; keK: sin/cos K theta_m, pdsK: w times them, ksK: w^2 times them, the library's ``:stiff`` variant) on
+    the case's fit blocks with theta_f smoothed over W samples (discover's window, default 17) and prints, per block:
+    its bag, its share of the tested coefficient's partial information (the first column of the group), the largest
+    eigenvalue of its hat matrix H_bb, q99 |w|, the coefficient estimated from that block alone with the others pooled
+    (FWL), the same with every coefficient the block's own, the leave-one-block-out estimate and the block's CV SSE;
+    then the group's identification by each test: jackknife Wald (discover's rule,
+    ``core._BlockGram.jackknife_wald``), cluster sandwich CR0 / CR1, the leverage-corrected CR2 (Bell & McCaffrey
+    2002) with its Bell-McCaffrey degrees of freedom and their 3-sigma t^2 quantile (one tested column), CR3 (the
+    jackknife's linearisation), the restricted-score block sign-flip test (wild-cluster-restricted in randomization
+    form) and the block sign-flip test on the blocks' own estimates (Canay, Romano & Shaikh 2017: exact under
+    independent blocks with symmetric estimates).
 
 ``python bench/diag_block_leverage.py --synthetic [N]``
     Monte Carlo of the same tests on a synthetic Q_red-like plant with a known answer (15 blocks, y = 3 w + k3 w^3 +

@@ -33,8 +33,8 @@ def _plant(seed, k3_blocks, lev=2.2):
 
 
 def _cr_wald(X, y, block, col, power):
-    """Wald of coefficient ``col`` with the cluster covariance sum_b u_b u_b', u_b = M X_b' (I - H_bb)^-power/2 e_b (power 0:
-    CR0, 1: CR2, 2: CR3), from the rows (independent of the discovery code)."""
+    """Wald of coefficient ``col`` with the cluster covariance sum_b u_b u_b', u_b = M X_b' (I - H_bb)^-power/2 e_b
+    (power 0: CR0, 1: CR2, 2: CR3), from the rows (independent of the discovery code)."""
     M = np.linalg.inv(X.T @ X)
     b = M @ X.T @ y
     e = y - X @ b
