@@ -335,7 +335,7 @@ def discover_dataset(bags: list[str]):
     choice and its acceleration window / timing choice (``ALPHA_WINDOW``), both made on the fit bags. Used by the
     greedy reference and the discover-vs-greedy diagnoses (``diag_*_vs_greedy.py``)."""
     from hd_bag import read_mission
-    from hd_ground.discovery.core import choose_alpha_window, choose_speed_timing
+    from hd_ground.discovery.core import choose_alpha_window, choose_retime_window, choose_speed_timing
     from hd_ground.discovery.data import dataset_from_missions
 
     names = [str(b) for b in bags]
@@ -344,9 +344,12 @@ def discover_dataset(bags: list[str]):
     ho = ds.bag == len(bags) - 1
     if ds.speed_lags:  # the same signals discover reads (its speed-timing choice, made on the fit bags)
         ds = choose_speed_timing(dataset_from_missions(ms, names, retime_speeds=False), ds, ho)[0]
+    if ds.speed_lags:  # ... re-timed with the same derivative window (its choice on the fit bags)
+        ds = choose_retime_window(lambda win: dataset_from_missions(ms, names, retime_window_s=win), ds, ho)[0]
     if ALPHA_WINDOW != "default":  # ... and the same acceleration (its timing / window choice, on the fit bags)
-        ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
-            ms, names, retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho, mode=ALPHA_WINDOW)[0]
+        ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags), rw=ds.speed_window_s: dataset_from_missions(
+            ms, names, retime_speeds=re, alpha_window_s=win, alpha_timing=timing, retime_window_s=rw), ds, ho,
+            mode=ALPHA_WINDOW)[0]
     return ds, ho
 
 
