@@ -7,7 +7,9 @@ one differentiates the speed's noise. Synthetic missions written here (numpy onl
 the true speed at the angle's instants, so the right window is known: the one whose re-timed speed is closest to the
 true speed. ``core.choose_retime_window`` must move off the 20 ms default where reversals take a few ms (and pick a
 window whose re-timed speed is near the best candidate's), and keep the default on slow motion with a noisy speed
-(nothing to gain, noise to lose).
+(nothing to gain, noise to lose). The identification is opt-in (``Options.retime_window="identify"``, ``hdphm discover
+--retime-window identify``): on the bench it moves the raw Stribeck profile's held-out error both ways
+(docs/DISCOVERY_PASSES.md, branch disc31's pass).
 """
 
 from types import SimpleNamespace
@@ -19,6 +21,7 @@ from hd_ground.discovery.core import Options, choose_retime_window
 from hd_ground.discovery.data import Dataset, _derivative, retime_speed, speed_lag
 
 FS, N_BAGS, DUR = 1000.0, 4, 4.0
+IDENTIFY = Options(retime_window="identify")
 J, T_C, EPS, B = 0.002, 0.5, 0.3, 0.01
 
 
@@ -78,7 +81,7 @@ def _make(fast: bool):
 def test_retime_window_identified_where_the_reversals_need_it(fast):
     make, speed_error, ho = _make(fast)
     ds0 = make(0.02)
-    ds, st = choose_retime_window(make, ds0, ho)
+    ds, st = choose_retime_window(make, ds0, ho, IDENTIFY)
     assert st.startswith("speed re-timing window:"), st
     errs = {w: speed_error(make(w)) for w in (0.005, 0.009, 0.017, 0.02, 0.033)}
     best = min(errs, key=errs.get)
@@ -98,8 +101,9 @@ def test_retime_window_identified_where_the_reversals_need_it(fast):
 def test_retime_window_default_mode_tries_nothing():
     make, _, ho = _make(True)
     ds0 = make(0.02)
-    ds, st = choose_retime_window(make, ds0, ho, Options(retime_window="default"))
-    assert ds is ds0 and st == ""
+    for opt in (Options(), Options(retime_window="default")):  # the default (opt-in: see the module docstring)
+        ds, st = choose_retime_window(make, ds0, ho, opt)
+        assert ds is ds0 and st == ""
 
 
 def test_identified_window_is_carried_to_the_twin():
@@ -109,7 +113,7 @@ def test_identified_window_is_carried_to_the_twin():
     from hd_twin.speedtiming import SpeedTiming
 
     make, _, ho = _make(True)
-    ds, _ = choose_retime_window(make, make(0.02), ho)
+    ds, _ = choose_retime_window(make, make(0.02), ho, IDENTIFY)
     m, _, _ = _mission(10, True)  # bag 0 of the fast plant
     entry = _speed_timing_entry(dict(ds.speed_lags), [_mission(10 + i, True)[0] for i in range(N_BAGS)],
                                 ds.speed_window_s)

@@ -164,10 +164,11 @@ class Options:
     # samples and the timing column, moved off the 20 ms default only when identified on the fit bags),
     # "timing" (20 ms, the timing column only), "default" (20 ms, nothing tried)
     alpha_window: str = "identify"
-    # the derivative window of the logged speeds' re-timing omega + tau omega' (choose_retime_window): "identify"
-    # (window among 5-33 samples, moved off the 20 ms default only when identified on the fit bags) or "default"
-    # (20 ms, the behaviour before the branch disc31 pass)
-    retime_window: str = "identify"
+    # the derivative window of the logged speeds' re-timing omega + tau omega' (choose_retime_window): "default"
+    # (20 ms) or "identify" (opt-in: window among 5-33 samples, moved off the 20 ms default only when identified on
+    # the fit bags; not the default: it moves the raw Stribeck profile's held-out error both ways, branch disc31's
+    # pass in docs/DISCOVERY_PASSES.md)
+    retime_window: str = "default"
     # the pre-sliding distance's profile (identify_presliding_filtered): "filtered" (on the torque balance filtered
     # as the acceleration is, with the state's timing against the torque profiled jointly) or "raw" (on the raw
     # columns, the ninth pass's behaviour)

@@ -98,6 +98,8 @@ def run_discovery(
     ds = dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag)
     # the acquisition skew of the torque sample after the angle's, from the identified speed lags (whether or not
     # the re-timed speeds are then used): the candidate re-timing of the position harmonics (choose_angle_timing)
+    if opt.retime_window not in ("identify", "default"):
+        raise DiscoveryError(f"Options.retime_window must be 'identify' or 'default', not {opt.retime_window!r}")
     if opt.angle_timing not in ("identify", "default", "retimed"):
         raise DiscoveryError(f"Options.angle_timing must be 'identify', 'default' or 'retimed', not {opt.angle_timing!r}")
     skew = angle_skew_of(ds.speed_lags) if opt.angle_timing != "default" else None
