@@ -14,6 +14,8 @@ made on the fit bags, ``bench_discover.discover_dataset`` with the window forced
   held-out RMSE and the fit-block CV.
 
     python bench/diag_retime_window.py CASE_DIR [--stribeck] [--windows 20,5,9]   (windows in ms)
+    python bench/diag_retime_window.py CASE_DIR --choice-only   (discover's choice with --retime-window identify:
+                                                                  whether the gate fires on the case, and why)
 
 CASE_DIR holds ``bags/*.mcap`` (``hdphm bench discover`` writes WORLD/EFFECT/bags). Diagnosis only: nothing here
 feeds an estimator.
@@ -33,8 +35,8 @@ def main(argv: list[str] | None = None) -> int:
     import bench_discover as B
     import diag_width_filtered as W
     from hd_bag import read_mission
-    from hd_ground.discovery.core import (Options, baseline_cv_folds, choose_alpha_window, choose_speed_timing,
-                                          standstill_rows)
+    from hd_ground.discovery.core import (Options, baseline_cv_folds, choose_alpha_window, choose_retime_window,
+                                          choose_speed_timing, standstill_rows)
     from hd_ground.discovery.data import dataset_from_missions
 
     args = argv if argv is not None else sys.argv[1:]
@@ -48,6 +50,19 @@ def main(argv: list[str] | None = None) -> int:
         wins = [float(x) * 1e-3 for x in args[args.index("--windows") + 1].split(",")]
     else:
         wins = [0.02] + [k * dt for k in (5, 9, 17, 33) if abs(k * dt - 0.02) >= 0.5 * dt]
+
+    ds0 = dataset_from_missions(ms, names)
+    ho0 = ds0.bag == len(bags) - 1
+    if ds0.speed_lags:
+        ds0, st = choose_speed_timing(dataset_from_missions(ms, names, retime_speeds=False), ds0, ho0)
+        print(st)
+    if not ds0.speed_lags:
+        print("speeds used as logged: the re-timing window is not tried (gate cannot fire)")
+    else:
+        print(choose_retime_window(lambda win: dataset_from_missions(ms, names, retime_window_s=win), ds0, ho0,
+                                   Options(retime_window="identify"))[1])
+    if "--choice-only" in args:
+        return 0
 
     def forced(win):
         def discover_dataset(_bags):
