@@ -2086,7 +2086,7 @@ def choose_retime_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | 
     if base is None:
         return ds, ""
     sse_d, cv_d = base
-    wins = [k * dt for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]
+    wins = [round(k * dt, 12) for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]
     longest = max(wins + [default_s])
     cands = [(cv_d, default_s, ds, sse_d)]
     tried = [f"{default_s * 1e3:.3g} ms: {cv_d:.4g}"]
