@@ -289,6 +289,10 @@ DEFAULT_FAMILY_EFFECTS = ("position_periodic_torque", "stribeck_friction", "kine
 #: (the default: moved off 20 ms only when identified on the fit bags), "timing" (20 ms + the timing column) or
 #: "default" (20 ms, nothing tried: the behaviour before the eighth pass)
 ALPHA_WINDOW = "identify"
+#: discover's (and greedy's) derivative window of the logged speeds' re-timing (--retime-window,
+#: core.choose_retime_window): "default" (20 ms) or "identify" (moved off 20 ms only when identified on the fit bags;
+#: opt-in, branch disc31's pass in docs/DISCOVERY_PASSES.md)
+RETIME_WINDOW = "default"
 
 #: plant2 effect -> expected findings (signal, name, variable, order); None order: any
 PLANT2_EXPECT = {
@@ -335,7 +339,7 @@ def discover_dataset(bags: list[str]):
     choice and its acceleration window / timing choice (``ALPHA_WINDOW``), both made on the fit bags. Used by the
     greedy reference and the discover-vs-greedy diagnoses (``diag_*_vs_greedy.py``)."""
     from hd_bag import read_mission
-    from hd_ground.discovery.core import choose_alpha_window, choose_speed_timing
+    from hd_ground.discovery.core import Options, choose_alpha_window, choose_retime_window, choose_speed_timing
     from hd_ground.discovery.data import dataset_from_missions
 
     names = [str(b) for b in bags]
@@ -344,9 +348,13 @@ def discover_dataset(bags: list[str]):
     ho = ds.bag == len(bags) - 1
     if ds.speed_lags:  # the same signals discover reads (its speed-timing choice, made on the fit bags)
         ds = choose_speed_timing(dataset_from_missions(ms, names, retime_speeds=False), ds, ho)[0]
+    if ds.speed_lags:  # ... re-timed with the same derivative window (its choice on the fit bags)
+        ds = choose_retime_window(lambda win: dataset_from_missions(ms, names, retime_window_s=win), ds, ho,
+                                  Options(retime_window=RETIME_WINDOW))[0]
     if ALPHA_WINDOW != "default":  # ... and the same acceleration (its timing / window choice, on the fit bags)
-        ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
-            ms, names, retime_speeds=re, alpha_window_s=win, alpha_timing=timing), ds, ho, mode=ALPHA_WINDOW)[0]
+        ds = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags), rw=ds.speed_window_s: dataset_from_missions(
+            ms, names, retime_speeds=re, alpha_window_s=win, alpha_timing=timing, retime_window_s=rw), ds, ho,
+            mode=ALPHA_WINDOW)[0]
     return ds, ho
 
 
@@ -449,7 +457,7 @@ def evaluate_world_case(world: str, effect: str | None, bags: list[str], expect:
     from hd_ground.discovery.core import Options
 
     rep = run_discovery(bags, out, heldout=[bags[-1]], plots=False, within_bag_check=False, signals=signals,
-                        opt=Options(alpha_window=ALPHA_WINDOW),
+                        opt=Options(alpha_window=ALPHA_WINDOW, retime_window=RETIME_WINDOW),
                         log=lambda s: None, results_out=res)
     t_d = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -580,9 +588,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plots", action="store_true", help="write discovery's PNGs per case")
     ap.add_argument("--alpha-window", choices=("default", "timing", "identify"), default="identify",
                     help="worlds: the motor acceleration's derivative window for discover and greedy alike")
+    ap.add_argument("--retime-window", choices=("default", "identify"), default="default",
+                    help="worlds: the logged speeds' re-timing derivative window for discover and greedy alike")
     a = ap.parse_args(argv)
-    global ALPHA_WINDOW
+    global ALPHA_WINDOW, RETIME_WINDOW
     ALPHA_WINDOW = a.alpha_window
+    RETIME_WINDOW = a.retime_window
     if a.suite == "worlds":
         a.duration = a.duration or 4.0
         if a.out == "runs/discover_sim":

@@ -41,6 +41,11 @@ def register(subparsers) -> None:
                         "and the inertia torque's timing; the 20 ms default kept unless the tau_m baseline's CV error "
                         "drops by --min-gain in most blocks, beyond one paired SE, at a window inside the range), "
                         "'timing' (20 ms, the timing column only) or 'default' (20 ms, nothing tried)")
+    p.add_argument("--retime-window", choices=["default", "identify"], default="default",
+                   help="derivative window of the logged speeds' re-timing (omega + tau omega'): 'default' (20 ms) or "
+                        "identified on the fit bags (opt-in; 5-33 samples, the 20 ms default kept unless the tau_m "
+                        "baseline's CV error drops by --min-gain in most blocks, beyond one paired SE, below the "
+                        "longest window)")
     p.add_argument("--angle-timing", choices=["identify", "default", "retimed"], default="identify",
                    help="position harmonics at the logged angle or at the angle re-timed by the acquisition skew "
                         "identified from the speeds' lag: identified on the fit bags' CV ('identify'), 'default' (as "
@@ -74,7 +79,7 @@ def _discover(args: argparse.Namespace) -> int:
         return 2
     opt = Options(min_gain=args.min_gain, max_effects=args.max_effects, wald_sigmas=args.wald_sigmas,
                   angle_offset=args.angle_offset, calib_frac=args.calib_frac, alpha_window=args.alpha_window,
-                  angle_timing=args.angle_timing, width_fit=args.width_fit)
+                  angle_timing=args.angle_timing, width_fit=args.width_fit, retime_window=args.retime_window)
     try:
         heldout = args.heldout
         if args.fit_files:

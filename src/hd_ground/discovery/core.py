@@ -47,7 +47,7 @@ import numpy as np
 from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_state, vp_shape
 from hd_twin.terms import basis_matrix, evaluate_terms
 
-from .data import DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, angle_resolution, with_smoothed_twist
+from .data import DEFAULT_ALPHA_WINDOW_S, DEFAULT_RETIME_WINDOW_S, Dataset, DiscoveryError, angle_resolution, with_smoothed_twist
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
                       state_var)
 from .loopshape import refine_loop_shape, twist_state_of
@@ -164,6 +164,11 @@ class Options:
     # samples and the timing column, moved off the 20 ms default only when identified on the fit bags),
     # "timing" (20 ms, the timing column only), "default" (20 ms, nothing tried)
     alpha_window: str = "identify"
+    # the derivative window of the logged speeds' re-timing omega + tau omega' (choose_retime_window): "default"
+    # (20 ms) or "identify" (opt-in: window among 5-33 samples, moved off the 20 ms default only when identified on
+    # the fit bags; not the default: it moves the raw Stribeck profile's held-out error both ways, branch disc31's
+    # pass in docs/DISCOVERY_PASSES.md)
+    retime_window: str = "default"
     # the pre-sliding distance's profile (identify_presliding_filtered): "filtered" (on the torque balance filtered
     # as the acceleration is, with the state's timing against the torque profiled jointly) or "raw" (on the raw
     # columns, the ninth pass's behaviour)
@@ -2047,6 +2052,72 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
                 else "no alternative lowers the CV error")
     return ds, (f"acceleration: the default derivative window of alpha_m ({default_s * 1e3:.3g} ms, no timing column) "
                 f"is kept ({best_txt}; {stats})")
+
+
+def choose_retime_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
+                         default_s: float = DEFAULT_RETIME_WINDOW_S) -> tuple[Dataset, str]:
+    """The derivative window of the logged speeds' re-timing ``omega + tau omega'`` (``hd_twin.speedtiming``),
+    identified on the fit bags. ``ds``: the re-timed dataset at ``default_s`` (``choose_speed_timing`` kept it);
+    ``make(window_s)`` builds the same rows with the delays identified and the speeds re-timed at ``window_s``.
+
+    omega' is a quadratic Savitzky-Golay derivative of the logged speed; its window is a filter bandwidth, not
+    a property of the drive (as the acceleration's, :func:`choose_alpha_window`): too long and tau omega' lags
+    a fast reversal, so the re-timed speed is wrong exactly where the friction's transition and a Stribeck hump
+    are seen; too short and the speed's noise, differentiated and scaled by tau, enters every speed-dependent
+    column (errors in variables). Neither side is known beforehand (it depends on the drive's delay, its
+    speed noise and how fast the missions reverse), so the bias-variance trade-off is measured: windows of 5,
+    9, 17 and 33 samples at the log rate (the shortest quadratic derivative, doubling) and the default, each with
+    its own delay (``data.speed_timing`` at that window); the one with the lowest cross-validated error of the
+    plain tau_m baseline on the fit bags (the same rows and blocks for all) replaces the default only when it is
+    *identified* against it by the rule of :func:`choose_alpha_window` (CV mean squared error lower by
+    ``opt.min_gain``, in at least ``opt.fold_majority`` of the blocks, by at least one paired standard error),
+    and not on the longest window tried (only bounded). The shortest window is allowed: it is the method's limit,
+    and its noise cost is inside the CV error it won on. Uncertainty: the windows whose CV is within one paired
+    standard error of the best are stated. Returns the dataset and a statement (empty when nothing was tried)."""
+    opt = opt or Options()
+    if opt.retime_window != "identify" or not ds.speed_lags:
+        return ds, ""
+    t = ds.t[ds.bag == ds.bag[0]]
+    dt = float(np.median(np.diff(t))) if len(t) > 2 else 0.0
+    if not dt > 0:
+        return ds, ""
+    still, _ = standstill_rows(ds, opt.standstill_sigmas)
+    base = baseline_cv_folds(ds, heldout, ~still)
+    if base is None:
+        return ds, ""
+    sse_d, cv_d = base
+    wins = [round(k * dt, 12) for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]
+    longest = max(wins + [default_s])
+    cands = [(cv_d, default_s, ds, sse_d)]
+    tried = [f"{default_s * 1e3:.3g} ms: {cv_d:.4g}"]
+    for win in wins:
+        d2 = make(win)
+        if d2.n != ds.n or set(d2.speed_lags) != set(ds.speed_lags):
+            tried.append(f"{win * 1e3:.3g} ms: not comparable (other rows or re-timed speeds)")
+            continue
+        r = baseline_cv_folds(d2, heldout, ~still)
+        if r is None or len(r[0]) != len(sse_d):
+            continue
+        tried.append(f"{win * 1e3:.3g} ms: {r[1]:.4g}")
+        cands.append((r[1], win, d2, r[0]))
+    cv, win, d2, sse = min(cands, key=lambda c: c[0])
+    gain, folds, t_pair, why = _identified_against(sse_d, sse, opt)
+    near = sorted(c[1] for c in cands if c[1] == win or _paired_t(c[3], sse) < 1.0)
+    lag = ", ".join(f"{k} {v * 1e3:.3g} ms" for k, v in d2.speed_lags.items())
+    stats = (f"CV RMSE of the tau_m baseline {cv_d:.4g} -> {cv:.4g} N*m, {gain:+.1%}, better in {folds:.0%} of the "
+             f"blocks, {t_pair:.1f} paired SE; within one SE of the best: "
+             f"{', '.join(f'{w * 1e3:.3g}' for w in near)} ms; tried {'; '.join(tried)}")
+    if win == longest and win != default_s:
+        why.append(f"on the longest window tried ({longest * 1e3:.3g} ms): only bounded, not identified")
+    if d2 is not ds and not why:
+        d2.notes = list(ds.notes)
+        d2.alpha_window = dict(ds.alpha_window)
+        return d2, (f"speed re-timing window: identified on the fit bags, {win * 1e3:.3g} ms (delays {lag}; {stats}; "
+                    f"against the default {default_s * 1e3:.3g} ms); used")
+    best_txt = (f"best alternative {win * 1e3:.3g} ms: {'; '.join(why)}" if d2 is not ds
+                else "no alternative lowers the CV error")
+    return ds, (f"speed re-timing window: the default derivative window ({default_s * 1e3:.3g} ms) is kept "
+                f"({best_txt}; {stats})")
 
 
 def angle_skew_of(lags: dict) -> float | None:

@@ -18,6 +18,7 @@ import numpy as np
 
 from hd_bag.mission import Mission
 # the re-timing equation and its derivative live in the twin (one place: the twin applies the same re-timing)
+from hd_twin.speedtiming import DEFAULT_WINDOW_S as DEFAULT_RETIME_WINDOW_S
 from hd_twin.speedtiming import retime_speed  # noqa: F401  (re-exported)
 from hd_twin.speedtiming import sg2_derivative as _derivative
 
@@ -46,6 +47,9 @@ class Dataset:
     # the torque sample's skew after the angle's [s]: position harmonics are taken at theta + skew * omega
     # (hd_twin.terms.retimed_angle; core.choose_angle_timing; 0: at the logged angle)
     angle_skew: float = 0.0
+    # the derivative window [s] of the logged speeds' re-timing (omega + tau omega'; core.choose_retime_window):
+    # the delays in ``speed_lags`` were identified with it and the speeds re-timed with it
+    speed_window_s: float = DEFAULT_RETIME_WINDOW_S
 
     @property
     def n(self) -> int:
@@ -55,7 +59,7 @@ class Dataset:
         return Dataset({k: v[mask] for k, v in self.signals.items()}, self.bag[mask], self.block[mask],
                        self.tfrac[mask], self.t[mask], self.segment[mask], self.bag_names, self.gear_ratio,
                        self.torque_constant, list(self.notes), dict(self.speed_lags), dict(self.alpha_window),
-                       self.twist_window, self.angle_skew)
+                       self.twist_window, self.angle_skew, self.speed_window_s)
 
 
 def with_angle_skew(ds: Dataset, skew_s: float) -> Dataset:
@@ -205,10 +209,12 @@ DEFAULT_ALPHA_WINDOW_S = 0.02
 def signals_of_mission(m: Mission, *, deriv_window_s: float = DEFAULT_ALPHA_WINDOW_S,
                        speed_lags: dict[str, float] | None = None,
                        alpha_window_s: float | None = None,
-                       alpha_timing: bool = False) -> tuple[dict[str, np.ndarray], list[str]]:
+                       alpha_timing: bool = False,
+                       retime_window_s: float | None = None) -> tuple[dict[str, np.ndarray], list[str]]:
     """Signal table of one mission (full length, may contain NaN) and notes on what was done.
 
-    ``speed_lags``: ``{speed: tau}`` from :func:`speed_timing`; those logged speeds are re-timed.
+    ``speed_lags``: ``{speed: tau}`` from :func:`speed_timing`; those logged speeds are re-timed, with the
+    derivative window ``retime_window_s`` (default ``deriv_window_s``; ``core.choose_retime_window``).
     ``alpha_window_s``: window of the motor acceleration's derivative filter (default ``deriv_window_s``;
     ``core.choose_alpha_window`` identifies it on the fit bags). ``alpha_timing``: also ``alpha_m_dot``, the
     derivative of alpha_m with the same window (the baseline's J tau_a alpha_m' column: the inertia torque's
@@ -235,7 +241,7 @@ def signals_of_mission(m: Mission, *, deriv_window_s: float = DEFAULT_ALPHA_WIND
         notes.append(f"{name}: omega_m mostly missing; derived from theta_m")
     else:
         for w, tau in (speed_lags or {}).items():
-            s[w] = retime_speed(s[w], m.t, seg, tau, deriv_window_s)
+            s[w] = retime_speed(s[w], m.t, seg, tau, deriv_window_s if retime_window_s is None else retime_window_s)
     s["i_q"] = s["tau_m"] / kt
     aw_s = deriv_window_s if alpha_window_s is None else alpha_window_s
     s["alpha_m"] = _derivative(s["omega_m"], m.t, seg, aw_s)
@@ -304,18 +310,20 @@ def with_smoothed_twist(ds: Dataset, window: int) -> Dataset:
     sig["phi"] = sm - sig["theta_m"] / ds.gear_ratio
     sig["windup"] = -sig["phi"]
     out = Dataset(sig, ds.bag, ds.block, ds.tfrac, ds.t, ds.segment, ds.bag_names, ds.gear_ratio, ds.torque_constant,
-                  list(ds.notes), dict(ds.speed_lags), dict(ds.alpha_window), w, ds.angle_skew)
+                  list(ds.notes), dict(ds.speed_lags), dict(ds.alpha_window), w, ds.angle_skew, ds.speed_window_s)
     return out
 
 
 def dataset_from_missions(missions: list[Mission], names: list[str] | None = None, *, blocks_per_bag: int = 5,
                           required: tuple[str, ...] = ("theta_m", "omega_m", "tau_m"),
                           retime_speeds: bool = True, alpha_window_s: float | None = None,
-                          alpha_timing: bool = False) -> Dataset:
+                          alpha_timing: bool = False, retime_window_s: float | None = None) -> Dataset:
     """Concatenate missions into one :class:`Dataset`.
 
     Logged speeds are first put on their angles' time base by the identified sensor model of
-    :func:`speed_timing` (``retime_speeds=False``: as logged). ``alpha_window_s``: the motor acceleration's
+    :func:`speed_timing` (``retime_speeds=False``: as logged), its delays identified and the speeds re-timed with
+    the derivative window ``retime_window_s`` (default ``DEFAULT_RETIME_WINDOW_S``, 20 ms;
+    ``core.choose_retime_window`` identifies it on the fit bags). ``alpha_window_s``: the motor acceleration's
     derivative window (default: that of :func:`signals_of_mission`); ``alpha_timing``: add ``alpha_m_dot``.
 
     A signal that is entirely missing in any bag is dropped from all bags (the
@@ -324,11 +332,13 @@ def dataset_from_missions(missions: list[Mission], names: list[str] | None = Non
     if not missions:
         raise DiscoveryError("no missions given")
     names = names or [m.report.path or f"bag{i}" for i, m in enumerate(missions)]
-    lags, notes = speed_timing(missions) if retime_speeds else ({}, [])
+    rw = DEFAULT_RETIME_WINDOW_S if retime_window_s is None else float(retime_window_s)
+    lags, notes = speed_timing(missions, window_s=rw) if retime_speeds else ({}, [])
     tables = []
     gear, kt = None, None
     for m, nm in zip(missions, names):
-        s, nn = signals_of_mission(m, speed_lags=lags, alpha_window_s=alpha_window_s, alpha_timing=alpha_timing)
+        s, nn = signals_of_mission(m, speed_lags=lags, alpha_window_s=alpha_window_s, alpha_timing=alpha_timing,
+                                   retime_window_s=rw)
         tables.append(s)
         notes += nn
         if gear is None:
@@ -372,4 +382,4 @@ def dataset_from_missions(missions: list[Mission], names: list[str] | None = Non
         nblk += blocks_per_bag
     return Dataset({k: np.concatenate(v) for k, v in cols.items()}, np.concatenate(bag), np.concatenate(block),
                    np.concatenate(tfrac), np.concatenate(tt), np.concatenate(segm), list(names), float(gear),
-                   float(kt), notes, dict(lags))
+                   float(kt), notes, dict(lags), speed_window_s=rw)

@@ -20,8 +20,8 @@ from hd_bag.files import find_bags
 from hd_bag.jsonsafe import json_safe
 
 from .core import (DEFAULT_DECLARED, Options, SignalResult, angle_skew_of, choose_alpha_window, choose_angle_timing,
-                   choose_speed_timing, choose_twist_window, confirm_twist_window, discover_signal, split_fit_heldout,
-                   static_term, uses_angle_harmonic)
+                   choose_retime_window, choose_speed_timing, choose_twist_window, confirm_twist_window,
+                   discover_signal, split_fit_heldout, static_term, uses_angle_harmonic)
 from .data import (DEFAULT_ALPHA_WINDOW_S, Dataset, DiscoveryError, dataset_from_missions, with_angle_skew,
                    with_smoothed_twist)
 
@@ -98,6 +98,8 @@ def run_discovery(
     ds = dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag)
     # the acquisition skew of the torque sample after the angle's, from the identified speed lags (whether or not
     # the re-timed speeds are then used): the candidate re-timing of the position harmonics (choose_angle_timing)
+    if opt.retime_window not in ("identify", "default"):
+        raise DiscoveryError(f"Options.retime_window must be 'identify' or 'default', not {opt.retime_window!r}")
     if opt.angle_timing not in ("identify", "default", "retimed"):
         raise DiscoveryError(f"Options.angle_timing must be 'identify', 'default' or 'retimed', not {opt.angle_timing!r}")
     skew = angle_skew_of(ds.speed_lags) if opt.angle_timing != "default" else None
@@ -132,11 +134,18 @@ def run_discovery(
         ds, st_ = choose_speed_timing(dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag,
                                                             retime_speeds=False), ds, ho, opt)
         ds.notes.append(st_)
+    if ds.speed_lags and opt.retime_window != "default":
+        # the re-timing's derivative window, by the same rule on the fit bags (core.choose_retime_window)
+        ds, st_ = choose_retime_window(lambda win: dataset_from_missions(
+            missions, names, blocks_per_bag=blocks_per_bag, retime_window_s=win), ds, ho, opt)
+        if st_:
+            ds.notes.append(st_)
     if opt.alpha_window != "default":
         # the acceleration's timing (and window), by the same rule on the fit bags (same speeds as chosen above)
-        ds, st_ = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags): dataset_from_missions(
-            missions, names, blocks_per_bag=blocks_per_bag, retime_speeds=re, alpha_window_s=win,
-            alpha_timing=timing), ds, ho, opt, mode=opt.alpha_window)
+        ds, st_ = choose_alpha_window(lambda win, timing, re=bool(ds.speed_lags), rw=ds.speed_window_s:
+                                      dataset_from_missions(missions, names, blocks_per_bag=blocks_per_bag,
+                                                            retime_speeds=re, alpha_window_s=win, alpha_timing=timing,
+                                                            retime_window_s=rw), ds, ho, opt, mode=opt.alpha_window)
         if st_:
             ds.notes.append(st_)
     for n_ in ds.notes:
@@ -219,7 +228,8 @@ def run_discovery(
     # sin / cos bases carry it as "skew_s" with their angle's "rate", so the twin evaluates them the same way)
     report["angle_skew_s"] = dict(angle_skews)
     new_dir = write_twin_version(out / "twin", twin, twin_dir, results, retrain=retrain, missions=missions, log=log,
-                                 speed_lags=ds.speed_lags, acceleration=report["acceleration"],
+                                 speed_lags=ds.speed_lags, speed_window_s=ds.speed_window_s,
+                                 acceleration=report["acceleration"],
                                  twist_window=twist_window, angle_skews=angle_skews)
     report["twin_out"] = str(new_dir) if new_dir else None
     if plots and results:
@@ -274,6 +284,9 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
     rep = {"format": REPORT_FORMAT, "bags": ds.bag_names, "split": split, "twin_in": twin_dir,
            "options": asdict(opt), "signals": per, "data_notes": list(ds.notes),
            "speed_lags": dict(ds.speed_lags),
+           # the re-timing's derivative window the speed lags were identified and applied with (core.choose_retime_window;
+           # None: speeds used as logged)
+           "speed_window_s": float(ds.speed_window_s) if ds.speed_lags else None,
            # the motor acceleration the models were fitted with (core.choose_alpha_window)
            "acceleration": dict(ds.alpha_window) or {"window_s": DEFAULT_ALPHA_WINDOW_S, "timing": False}}
     if primary:
@@ -289,6 +302,7 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
 
 def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, results: list[SignalResult], *,
                        retrain: bool, missions, log, speed_lags: dict | None = None,
+                       speed_window_s: float | None = None,
                        acceleration: dict | None = None, twist_window: int = 0,
                        angle_skews: dict | None = None) -> Path | None:
     """Write the augmented model version (only when something was found).
@@ -355,7 +369,7 @@ def write_twin_version(dst: Path, twin: dict | None, twin_dir: str | None, resul
                 # the identified friction transition width (hd_twin.physics' regularised sign)
                 params["eps_omega"] = r.baseline_params["eps_omega"]
     cfg["params"] = params
-    timing = _speed_timing_entry(speed_lags or {}, missions)
+    timing = _speed_timing_entry(speed_lags or {}, missions, speed_window_s)
     parent_timing = cfg.pop("speed_timing", None)
     if twin is not None and "normalization" in cfg and parent_timing:
         # a copied network keeps the inputs it was trained on until it is retrained (below)
@@ -408,14 +422,16 @@ def _twist_smoothing_entry(twist_window: int, missions) -> dict:
     return TwistSmoothing.from_samples(int(twist_window), float(missions[0].fs)).to_config()
 
 
-def _speed_timing_entry(speed_lags: dict, missions) -> dict:
-    """``config.json:speed_timing`` for the re-timing discovery applied (with each delay's standard error)."""
+def _speed_timing_entry(speed_lags: dict, missions, window_s: float | None = None) -> dict:
+    """``config.json:speed_timing`` for the re-timing discovery applied (with each delay's standard error) and its
+    derivative window ``window_s`` (``core.choose_retime_window``; None: the default 20 ms)."""
     if not speed_lags:
         return {}
-    from hd_twin.speedtiming import SpeedTiming
+    from hd_twin.speedtiming import DEFAULT_WINDOW_S, SpeedTiming
 
     from .data import speed_lag
 
+    w = DEFAULT_WINDOW_S if window_s is None else float(window_s)
     angle = {"omega_m": "theta_m", "omega_f": "theta_f"}
-    se = {k: speed_lag(missions, k, angle[k])[1] for k in speed_lags} if missions else {}
-    return SpeedTiming.from_lags(speed_lags, se).to_config()
+    se = {k: speed_lag(missions, k, angle[k], window_s=w)[1] for k in speed_lags} if missions else {}
+    return SpeedTiming.from_lags(speed_lags, se, window_s=w).to_config()
