@@ -1159,7 +1159,8 @@ class LifeModel:
                                    "threshold_hi_std": math.exp(self.theta["log_sY"])}),
                           "hi_noise_ar1": math.tanh(self.theta.get("atanh_rho", 0.0)),
                           **({"hi_noise_level_kappa": math.exp(self.theta["log_kappa"])} if "log_kappa" in self.theta
-                             else {})}}
+                             else {}),
+                          **({"hi_gain_rel_std": math.exp(self.theta["log_sg"])} if "log_sg" in self.theta else {})}}
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
             Path(path).write_text(json.dumps(d, indent=1, default=float))
@@ -1992,7 +1993,7 @@ class _UKF:
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
              progress: bool = False, n_draws: int = 20, threshold: str = "auto",
              failure_level: float | None = None, path: str = "power", failure_at: str = "interval",
-             noise: str = "constant", exposure_spread: str = "renewal") -> LifeModel:
+             noise: str = "constant", exposure_spread: str = "renewal", hi_gain: str = "shared") -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
@@ -2001,7 +2002,8 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
         try:
             fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
                                        threshold=threshold, failure_level=failure_level, path=path,
-                                       failure_at=failure_at, noise=noise, exposure_spread=exposure_spread)
+                                       failure_at=failure_at, noise=noise, exposure_spread=exposure_spread,
+                                       hi_gain=hi_gain)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -2014,9 +2016,10 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
         m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
                           threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at,
-                          noise=m.fit_info.get("noise", "constant"), exposure_spread=exposure_spread)
+                          noise=m.fit_info.get("noise", "constant"), exposure_spread=exposure_spread,
+                          hi_gain=m.fit_info.get("hi_gain", "shared"))
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
-        for k in ("noise_aic", "noise_rule"):
+        for k in ("noise_aic", "noise_rule", "gain_aic"):
             if k in fits[best].fit_info:
                 m.fit_info[k] = fits[best].fit_info[k]
         if "path_aic" in fits[best].fit_info:
