@@ -756,14 +756,15 @@ class _Batch:
         v2 = sig * sig
         pa, pc = sa * sa, (th["c"] * math.exp(th["log_sg"])) ** 2
         M11, M12, M22 = 1.0 / pa + Sgg / v2, Sgx / v2, 1.0 / pc + Sxx / v2
-        det = M11 * M22 - M12 * M12
         q1, q2 = Sge / v2, Sxe / v2
-        quad = (M22 * q1 * q1 - 2.0 * M12 * q1 * q2 + M11 * q2 * q2) / det
-        with np.errstate(divide="ignore", invalid="ignore"):
+        # (a crack-growth path next to its blow-up overflows here: nan / inf, that z dropped as impossible below)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            det = M11 * M22 - M12 * M12
+            quad = (M22 * q1 * q1 - 2.0 * M12 * q1 * q2 + M11 * q2 * q2) / det
             f = -0.5 * self.n[:, None] * (_LOG2PI + math.log(v2)) - 0.5 * (np.log(det) + math.log(pa * pc)) \
                 - 0.5 * np.maximum(See / v2 - quad, 0.0) \
                 + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho) - Slog
-        return np.where(blown | ~(det > 0), -np.inf, f)
+        return np.where(blown | ~(det > 0) | ~np.isfinite(f), -np.inf, f)
 
     def a_post(self, r: np.ndarray, th: dict, b: float, z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Posterior mean and variance of the unit offsets ``a_i`` given the HI record and ``r = exp(z)``
