@@ -391,9 +391,9 @@ def main(argv=None) -> int:
                          "uniform on the sd (default) or 1/sd (log; src/hd_prognostic/README.md, 'Over-coverage of a "
                          "small fleet')")
     ap.add_argument("--hi-gain", default="shared", choices=("shared", "unit", "auto"),
-                    help="HI gain: one for all units (shared, the default), per unit c (1 + g_i) with g_i ~ N(0, s_g^2) "
-                         "marginalised (unit; latent threshold only), or auto: the per-unit gain kept by AIC in each fit "
-                         "(src/hd_prognostic/README.md, 'A per-unit HI gain')")
+                    help="HI gain: one for all units (shared, the default), per unit c (1 + g_i) with "
+                         "g_i ~ N(0, s_g^2) marginalised (unit; latent threshold only), or auto: the per-unit gain "
+                         "kept by AIC in each fit (src/hd_prognostic/README.md, 'A per-unit HI gain')")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),
                     help="Virkler only: override --failure-at (kept for older commands)")
     ap.add_argument("--inspect-every", type=int, default=0, metavar="K",
