@@ -68,7 +68,8 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
         m = LifeModel.fit(train, exposure=exposure, feature=feature, time_unit=time_unit, n_draws=DRAWS[0],
                           seed=seed, threshold=THRESHOLD[0], failure_level=level,
                           path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0],
-                          exposure_spread=SPREAD[0], noise=NOISE[0], scale_prior=SCALE_PRIOR[0])
+                          exposure_spread=SPREAD[0], noise=NOISE[0], scale_prior=SCALE_PRIOR[0],
+                          hi_gain=GAIN[0])
         test = _copy_unit(u)
         test.events = UnitEvents(inspections=list(u.events.inspections))  # its end of life is not known
         sg, su, sp = _predict_all(m, test, eols[u.unit], samples, seed)
@@ -90,17 +91,22 @@ def _louo(units, eols, exposure, time_unit, feature, samples, seed, progress, la
 def _noise_fields(m) -> dict:
     """A noise="auto" fit's record for the fold's row: the noise kept, the level fit's regularity and the AICs."""
     fi = m.fit_info
+    out = {k: fi[k] for k in ("hi_gain", "gain_aic") if k in fi}
+    if "log_sg" in m.theta:
+        out["s_g"] = float(np.exp(m.theta["log_sg"]))
     if "noise_rule" not in fi:
-        return {}
-    return {"noise": fi["noise"], "noise_rule": fi["noise_rule"], "noise_aic": fi["noise_aic"]}
+        return out
+    return dict(out, noise=fi["noise"], noise_rule=fi["noise_rule"], noise_aic=fi["noise_aic"])
 
 
 def _noise_txt(m):
     """', noise level (regular)' for a noise="auto" fit: the noise kept and whether the level fit was regular."""
     r = m.fit_info.get("noise_rule")
+    g = (f", HI gain {m.fit_info['hi_gain']}" + (f" (s_g {np.exp(m.theta['log_sg']):.3f})" if "log_sg" in m.theta
+                                                 else "")) if "hi_gain" in m.fit_info else ""
     if r is None:
-        return ""
-    return f", noise {m.fit_info['noise']}" + ("" if r["regular"] else f" (level fit irregular: {r['reason']})")
+        return g
+    return f", noise {m.fit_info['noise']}" + ("" if r["regular"] else f" (level fit irregular: {r['reason']})") + g
 
 
 def _label(m):
@@ -153,6 +159,7 @@ THRESHOLD = ["auto"]  # where the failure threshold sits (--threshold; auto: max
 SPREAD = ["renewal+rate"]  # the future exposure's variability in the prognosis (--exposure-spread; LifeModel.fit)
 RATE = ["mean"]  # how the prognosis extrapolates a unit's exposure (--exposure-rate; UnitHistory.rate)
 SCALE_PRIOR = ["uniform"]  # prior of the between-unit scales in the parameter draws (--scale-prior; LifeModel.fit)
+GAIN = ["shared"]  # HI gain (--hi-gain; LifeModel.fit: one for all units, per unit, or by AIC per fit)
 NOISE = ["auto"]  # HI noise model (--noise; LifeModel.fit: constant, level-dependent, or by AIC per fit)
 FAILURE_AT = ["auto"]  # failure-time likelihood (--failure-at; auto: lifemodel.failure_at_rule, the definition's)
 
@@ -383,6 +390,10 @@ def main(argv=None) -> int:
                     help="prior of the between-unit scales (rate, offset, threshold scatter) in the parameter draws: "
                          "uniform on the sd (default) or 1/sd (log; src/hd_prognostic/README.md, 'Over-coverage of a "
                          "small fleet')")
+    ap.add_argument("--hi-gain", default="shared", choices=("shared", "unit", "auto"),
+                    help="HI gain: one for all units (shared, the default), per unit c (1 + g_i) with "
+                         "g_i ~ N(0, s_g^2) marginalised (unit; latent threshold only), or auto: the per-unit gain "
+                         "kept by AIC in each fit (src/hd_prognostic/README.md, 'A per-unit HI gain')")
     ap.add_argument("--virkler-failure", default=None, choices=("auto", "crossing", "interval"),
                     help="Virkler only: override --failure-at (kept for older commands)")
     ap.add_argument("--inspect-every", type=int, default=0, metavar="K",
@@ -406,6 +417,7 @@ def main(argv=None) -> int:
     RATE[0] = args.exposure_rate
     SPREAD[0] = args.exposure_spread
     NOISE[0] = args.noise
+    GAIN[0] = args.hi_gain
     SCALE_PRIOR[0] = args.scale_prior
     JOBS[0] = args.jobs
     out = Path(args.out)
@@ -529,7 +541,8 @@ def _louo_subset(units, eols, args, name, level=None):
                           time_unit="step", n_draws=DRAWS[0], seed=args.seed,
                           threshold="observable" if FAILURE_AT[0] == "crossing" else THRESHOLD[0],
                           failure_level=level, path=PATH[0], failure_at=FAILURE_AT[0], exposure_rate=RATE[0],
-                          exposure_spread=SPREAD[0], noise=NOISE[0], scale_prior=SCALE_PRIOR[0])
+                          exposure_spread=SPREAD[0], noise=NOISE[0], scale_prior=SCALE_PRIOR[0],
+                          hi_gain=GAIN[0])
         test = _copy_unit(u)
         test.events = UnitEvents()
         sg, su, sp = _predict_all(m, test, eols[u.unit], args.samples, args.seed)

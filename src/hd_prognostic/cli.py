@@ -282,7 +282,7 @@ def _fit_life(args) -> int:
         print(f"note: {n}", file=sys.stderr)
     m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws, threshold=args.threshold,
                  failure_level=args.failure_level, path=args.path, failure_at=args.failure_at, noise=args.noise,
-                 exposure_spread=args.exposure_spread)
+                 exposure_spread=args.exposure_spread, hi_gain=args.hi_gain)
     m.to_json(args.out)
     fi = m.fit_info
     print(json.dumps({"exposure": m.exposure, "E_ref": m.E_ref, **m.to_json()["readable"],
@@ -296,6 +296,7 @@ def _fit_life(args) -> int:
                       "level_aic": fi.get("level_aic"),
                       "noise": fi.get("noise", "constant"), "noise_aic": fi.get("noise_aic"),
                       "noise_rule": fi.get("noise_rule"),
+                      "hi_gain": fi.get("hi_gain", "shared"), "gain_aic": fi.get("gain_aic"),
                       "parameter_draws": len(m.draws),
                       "parameter_draws_ess": fi.get("parameter_uncertainty", {}).get("ess")}, indent=1, default=float))
     print(f"wrote {args.out}")
@@ -445,6 +446,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "level L (level), or auto (the default, the bench's): the level-dependent noise fitted for the "
                         "path and threshold the constant noise chose, the lower AIC kept, compared only when its "
                         "optimum is regular (interior, identified; printed as noise_rule; src/hd_prognostic/README.md)")
+    p.add_argument("--hi-gain", choices=("shared", "unit", "auto"), default="shared",
+                   help="HI gain: one for all units (shared, the default), per unit c (1 + g_i), g_i ~ N(0, s_g^2), "
+                        "marginalised with the offset (unit; latent threshold), or auto: the per-unit gain fitted "
+                        "from the chosen fit's optimum and kept by AIC (identifiable from a unit's inspections; "
+                        "src/hd_prognostic/README.md, 'A per-unit HI gain')")
     p.add_argument("--exposure-spread", choices=("none", "renewal", "renewal+rate"), default="renewal+rate",
                    help="the future exposure's variability in the prognosis: renewal+rate (the default, the bench's: "
                         "the renewal spread of the unit's per-step increments and its mean rate's sampling "

@@ -80,6 +80,7 @@ THRESHOLDS = ("latent", "observable")  # where the failure threshold sits (LifeM
 SPREADS = ("none", "renewal", "renewal+rate")
 SCALE_PRIORS = ("uniform", "log")  # prior of the between-unit scales in the parameter draws (LifeModel.fit)
 NOISES = ("constant", "level")  # HI noise model (LifeModel.fit(noise=...)): one sigma, or growing with the level
+GAINS = ("shared", "unit")  # HI gain (LifeModel.fit(hi_gain=...)): one c, or c (1 + g_i) per unit (theta log_sg)
 MIN_INSPECTIONS = 4  # per quantity, fleet-wide, to fit its (alpha, beta, tau) map
 _LOG2PI = math.log(2 * math.pi)
 
@@ -555,26 +556,32 @@ class _Batch:
         self._lxmax = np.full(self.U, -np.inf)  # largest log exposure per unit (the record nearest blow-up)
         np.maximum.at(self._lxmax, self.idx, self.lx)
 
-    def _hstats(self, z: np.ndarray, th: dict, b: float):
+    def _hstats(self, z: np.ndarray, th: dict, b: float, gain: bool = False):
         """Level-dependent HI noise (``log_kappa`` in ``th``): record j's residual has the scale
         ``sigma s_j``, ``s_j = sqrt(1 + kappa^2 L_j^2)`` with ``L_j`` the latent path at that record and z, and
         the standardised residuals ``e_j / s_j`` are the AR(1) chain. Prewhitened per record and grid point:
         u = y/s - rho y'/s', g = 1/s - rho/s', x~ = L/s - rho L'/s' (at a chain start sqrt(1 - rho^2) times
         y/s, 1/s, L/s); returns per unit and grid point sum g g, sum g e, sum e e with e = u - a0 g - c x~,
         sum g (u - c x~) (for :meth:`a_post`), sum ln s_j (the Jacobian of the scaling) and whether a record
-        lies past a crack-growth path's blow-up."""
+        lies past a crack-growth path's blow-up.
+
+        ``gain`` (the per-unit HI gain, ``log_sg`` in ``th``): also the latent regressor x~ (L/s prewhitened) and
+        the sums x~ x~, g x~, x~ e, appended to the tuple; without ``log_kappa`` the scale s is 1 (constant noise)."""
         self._records()
         rho = math.tanh(th.get("atanh_rho", 0.0))
-        kap = math.exp(th["log_kappa"])
-        key = (id(z), z.shape, tuple(sorted(th.items())), b)
+        kap = math.exp(th["log_kappa"]) if "log_kappa" in th else 0.0
+        key = (id(z), z.shape, tuple(sorted(th.items())), b, gain)
         hc = getattr(self, "_hc", None)
         if hc is not None and hc[0] == key and hc[1] is z:
             return hc[2]
         shp = (len(self.idx), z.shape[1])
-        buf = self._hbuf if getattr(self, "_hbuf", None) is not None and self._hbuf[0].shape == shp else None
+        nv = 7 if gain else 4
+        buf = self._hbuf if getattr(self, "_hbuf", None) is not None and self._hbuf[0].shape == shp \
+            and self._hbuf[3].shape[1] == nv else None
         if buf is None:  # work arrays kept between calls (same grid size)
-            buf = self._hbuf = (np.empty(shp), np.empty(shp), np.empty(shp), np.empty((shp[0], 4, shp[1])))
-        A, B, C, V = buf
+            buf = self._hbuf = (np.empty(shp), np.empty(shp), np.empty(shp), np.empty((shp[0], nv, shp[1])),
+                                np.empty(shp) if gain else None, np.empty(shp) if gain else None)
+        A, B, C, V, D, Ex = buf
         if self.path == "power":  # L = exp(z) (E/E_ref)^b, in place
             np.take(np.exp(z), self.idx, axis=0, out=A)
             A *= np.exp(b * self.lx)[:, None]
@@ -582,6 +589,8 @@ class _Batch:
             with np.errstate(over="ignore", invalid="ignore"):
                 A[:] = _path_L(self.path, np.take(z, self.idx, axis=0), self.lx[:, None], th)
         np.minimum(A, 1e150, out=A)  # (a crack-growth path near its blow-up: finite; such z are dropped below)
+        if gain:
+            D[:] = A  # L, scaled by 1 / s below
         np.multiply(A, kap, out=B)
         B *= B  # (kappa L)^2 (_level_var, in place)
         np.log1p(B, out=V[:, 3])
@@ -604,12 +613,22 @@ class _Batch:
         np.multiply(A, A, out=V[:, 0])
         np.multiply(A, C, out=V[:, 1])
         np.multiply(C, C, out=V[:, 2])
+        if gain:  # x~ = L/s prewhitened into Ex: sums x~ x~, g x~, x~ e
+            D *= B
+            np.multiply(D[:-1], rho, out=Ex[1:])
+            np.subtract(D[1:], Ex[1:], out=Ex[1:])
+            Ex[st] = k0 * D[st]
+            np.multiply(Ex, Ex, out=V[:, 4])
+            np.multiply(A, Ex, out=V[:, 5])
+            np.multiply(Ex, C, out=V[:, 6])
         N, n = shp
-        S = (self._sum @ V.reshape(N, -1)).reshape(self.U, 4, n)
+        S = (self._sum @ V.reshape(N, -1)).reshape(self.U, nv, n)
         blown = (np.exp(z + self._lxmax[:, None]) >= _PARIS_UMAX) if self.path != "power" else \
             np.zeros(z.shape, bool)
         # sum g (u - c x~) = sum g e + a0 sum g g
         out = (S[:, 0], S[:, 1], S[:, 2], S[:, 1] + th["a0"] * S[:, 0], S[:, 3], blown)
+        if gain:
+            out = out + (S[:, 4], S[:, 5], S[:, 6])
         self._hc = (key, z, out)
         return out
 
@@ -671,8 +690,10 @@ class _Batch:
         f = -0.5 * ((z - mu) / s) ** 2 - math.log(s) - 0.5 * _LOG2PI
         n = self.n[:, None]
         het = "log_kappa" in th  # level-dependent noise: the sums depend on z per record (_hstats)
+        if "log_sg" in th:  # per-unit HI gain: (offset, gain) marginalised together
+            f = f + self._gain_terms(z, th, b, sa, sig, rho)
         # residual e = u - a0 g - c r x~ of the prewhitened series; offset a - a0 ~ N(0, s_a^2) marginalised
-        if het:
+        elif het:
             Sgg, Sge, See, _, Slog, blown = self._hstats(z, th, b)
         elif self.path == "power":
             Sw = (self.Suu - 2 * a0 * self.Sgu + a0 * a0 * self.Sgg)[:, None]
@@ -681,17 +702,18 @@ class _Batch:
             See = Sw - 2 * c * r * Swx + c * c * r * r * self.SXX[:, None]
         else:
             _, Sge, See, blown = self._zstats(z, th)
-        v2 = sig * sig
-        if not het:
-            Sgg = self.Sgg[:, None]
-        f = f - 0.5 * n * (_LOG2PI + math.log(v2)) - 0.5 * np.log1p(Sgg * sa * sa / v2) \
-            - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge if self.path == "power" and not het
-                          else np.maximum(See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge, 0.0)) \
-            + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho)  # Jacobian of the chain starts
-        if het:
-            f = f - Slog  # Jacobian of the record scales s_j
-        if self.path != "power" or het:
-            f = np.where(blown, -np.inf, f)
+        if "log_sg" not in th:
+            v2 = sig * sig
+            if not het:
+                Sgg = self.Sgg[:, None]
+            f = f - 0.5 * n * (_LOG2PI + math.log(v2)) - 0.5 * np.log1p(Sgg * sa * sa / v2) \
+                - 0.5 / v2 * (See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge if self.path == "power" and not het
+                              else np.maximum(See - sa * sa / (v2 + Sgg * sa * sa) * Sge * Sge, 0.0)) \
+                + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho)  # Jacobian of the chain starts
+            if het:
+                f = f - Slog  # Jacobian of the record scales s_j
+            if self.path != "power" or het:
+                f = np.where(blown, -np.inf, f)
         for j, q in enumerate(self.quantities):
             m = insp.get(q)
             sel = self.qi == j
@@ -722,6 +744,27 @@ class _Batch:
         if ce.any():
             f[ce] += special.log_ndtr(-(z[ce] + b * self.lcens[ce, None]) / sD)
         return f
+
+    def _gain_terms(self, z: np.ndarray, th: dict, b: float, sa: float, sig: float, rho: float) -> np.ndarray:
+        """log p(y | z) with a per-unit HI gain: ``y = a_i + c (1 + g_i) L + e``, ``g_i ~ N(0, s_g^2)`` (``log_sg``)
+        besides the offset ``a_i ~ N(a0, s_a^2)``; both marginalised in closed form. With the prewhitened
+        regressors G = [g, x~] (offset, latent path; scaled by 1/s under the level noise) and the residual e at
+        the prior means, p(y | z) = N(e; 0, sigma^2 I + G P G'), P = diag(s_a^2, (c s_g)^2): by Woodbury
+        -n/2 ln(2 pi sigma^2) - 1/2 ln det(I + P G'G / sigma^2) - 1/2 (e'e - q' M^-1 q / sigma^2) / sigma^2
+        with M = P^-1 + G'G / sigma^2, q = G'e; plus the chain starts' and the scales' Jacobians."""
+        Sgg, Sge, See, _, Slog, blown, Sxx, Sgx, Sxe = self._hstats(z, th, b, gain=True)
+        v2 = sig * sig
+        pa, pc = sa * sa, (th["c"] * math.exp(th["log_sg"])) ** 2
+        M11, M12, M22 = 1.0 / pa + Sgg / v2, Sgx / v2, 1.0 / pc + Sxx / v2
+        q1, q2 = Sge / v2, Sxe / v2
+        # (a crack-growth path next to its blow-up overflows here: nan / inf, that z dropped as impossible below)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            det = M11 * M22 - M12 * M12
+            quad = (M22 * q1 * q1 - 2.0 * M12 * q1 * q2 + M11 * q2 * q2) / det
+            f = -0.5 * self.n[:, None] * (_LOG2PI + math.log(v2)) - 0.5 * (np.log(det) + math.log(pa * pc)) \
+                - 0.5 * np.maximum(See / v2 - quad, 0.0) \
+                + 0.5 * self.n_start[:, None] * math.log(1.0 - rho * rho) - Slog
+        return np.where(blown | ~(det > 0) | ~np.isfinite(f), -np.inf, f)
 
     def a_post(self, r: np.ndarray, th: dict, b: float, z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Posterior mean and variance of the unit offsets ``a_i`` given the HI record and ``r = exp(z)``
@@ -1117,7 +1160,8 @@ class LifeModel:
                                    "threshold_hi_std": math.exp(self.theta["log_sY"])}),
                           "hi_noise_ar1": math.tanh(self.theta.get("atanh_rho", 0.0)),
                           **({"hi_noise_level_kappa": math.exp(self.theta["log_kappa"])} if "log_kappa" in self.theta
-                             else {})}}
+                             else {}),
+                          **({"hi_gain_rel_std": math.exp(self.theta["log_sg"])} if "log_sg" in self.theta else {})}}
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
             Path(path).write_text(json.dumps(d, indent=1, default=float))
@@ -1153,7 +1197,8 @@ class LifeModel:
             time_unit: str = "mission", maxiter: int = 600, progress: bool = False, n_draws: int = 20,
             seed: int = 0, threshold: str = "latent", failure_level: float | None = None,
             path: str = "power", failure_at: str = "interval", exposure_rate: str = "mean",
-            exposure_spread: str = "renewal", noise: str = "constant", scale_prior: str = "uniform") -> "LifeModel":
+            exposure_spread: str = "renewal", noise: str = "constant", scale_prior: str = "uniform",
+            hi_gain: str = "shared") -> "LifeModel":
         """Maximum likelihood over the units (their HI histories and events); see the module docstring.
 
         ``threshold``: ``latent`` (failure when the latent degradation crosses D_i), ``observable`` (failure
@@ -1192,13 +1237,20 @@ class LifeModel:
         level at the failure times and a fixed level leaves that bias to the level's scatter s_Y. ``auto``: the
         failure definition decides (:func:`failure_at_rule`: ``crossing`` when ``failure_level`` is given and every
         failed unit's records run through its failure, the record at the failure time being the first at or past
-        the level; ``interval`` otherwise); the choice and its reason go to ``fit_info["failure_at_rule"]``."""
+        the level; ``interval`` otherwise); the choice and its reason go to ``fit_info["failure_at_rule"]``.
+
+        ``hi_gain``: ``shared`` (one HI gain c for all units), ``unit`` (per-unit gain ``c (1 + g_i)``,
+        ``g_i ~ N(0, s_g^2)``, ``theta["log_sg"]``, marginalised with the offset: :meth:`_Batch._gain_terms`;
+        fitted for the path, threshold and noise chosen with the shared gain, from that optimum; latent threshold
+        only) or ``auto`` (that fit kept when its AIC is lower); ``fit_info["hi_gain"]``, ``fit_info["gain_aic"]``."""
         if exposure_rate not in ("median", "mean"):
             raise ValueError(f"life-model fit: exposure_rate {exposure_rate!r} is not one of median, mean")
         if exposure_spread not in SPREADS:
             raise ValueError(f"life-model fit: exposure_spread {exposure_spread!r} is not one of {', '.join(SPREADS)}")
         if scale_prior not in SCALE_PRIORS:
             raise ValueError(f"life-model fit: scale_prior {scale_prior!r} is not one of {', '.join(SCALE_PRIORS)}")
+        if hi_gain not in GAINS + ("auto",):
+            raise ValueError(f"life-model fit: hi_gain {hi_gain!r} is not one of {', '.join(GAINS)}, auto")
         if noise not in NOISES + ("auto",):
             raise ValueError(f"life-model fit: noise {noise!r} is not one of {', '.join(NOISES)}, auto")
         rule = None
@@ -1279,7 +1331,7 @@ class LifeModel:
                   for q in qs for k in ("alpha", "beta", "log_tau")]
         ix0 = [insp0[q][k] for q in qs for k in ("alpha", "beta", "log_tau")]
 
-        def setup(kind, fam="power", fix_level=True, start=None, nz="constant"):
+        def setup(kind, fam="power", fix_level=True, start=None, nz="constant", gain=False):
             """(parameter names, start in the optimiser's coordinates, scale, unpack, nll) of one threshold kind."""
             batch = batches[fam]
             flevel = failure_level if fix_level else None
@@ -1312,9 +1364,13 @@ class LifeModel:
                 names = names + ["log_kappa"]
                 scale = scale + [1.0]
                 t0 = dict(t0, log_kappa=0.0)
+            if gain:  # per-unit HI gain's relative scatter s_g (start 0.1; from a nested optimum: that start too)
+                names = names + ["log_sg"]
+                scale = scale + [1.0]
+                t0 = dict(t0, log_sg=math.log(0.1))
             sc = np.array(scale + iscale)
             if start is not None:  # a nested model's optimum (theta, inspections) as the start
-                t0 = dict(t0, **start[0])
+                t0 = dict(t0, **{k: v for k, v in start[0].items() if k in names})
                 ix0_ = [start[1][q][k] for q in qs for k in ("alpha", "beta", "log_tau")]
             x0 = np.array([t0[k] for k in names] + (ix0_ if start is not None else ix0)) / sc
             npar = len(names)
@@ -1341,6 +1397,8 @@ class LifeModel:
                     return 1e30
                 if kind == "latent" and not -9 < th["log_sD"] < 2:
                     return 1e30
+                if "log_sg" in th and not -9 < th["log_sg"] < 2:
+                    return 1e30
                 if kind == "observable" and not lo_sY < th["log_sY"] < lo_sY + 15.0:
                     return 1e30
                 if fam == "paris" and not (-12 < th["mu"] < 12 and abs(th.get("log_D0", 0.0)) < 12):
@@ -1354,8 +1412,8 @@ class LifeModel:
 
             return names, x0, unpack, nll
 
-        def ml(kind, fam="power", fix_level=True, start=None, nz="constant"):
-            names, xs0, unpack, nll = setup(kind, fam, fix_level, start, nz)
+        def ml(kind, fam="power", fix_level=True, start=None, nz="constant", gain=False):
+            names, xs0, unpack, nll = setup(kind, fam, fix_level, start, nz, gain)
             # quasi-Newton first (finite-difference gradients of a smooth quadrature), then a Nelder-Mead polish
             # (robust where the adaptive grid makes the finite differences noisy)
             r = optimize.minimize(nll, xs0, method="L-BFGS-B", options={"maxiter": 300, "eps": 1e-6})
@@ -1406,6 +1464,18 @@ class LifeModel:
         fam, kind, nz_best = min(allfits, key=lambda k: allfits[k]["aic"])
         fits = {k: v for (f_, k, nz), v in allfits.items() if f_ == fam and nz == nz_best}
         F = fits[kind]
+        gain_aic = None
+        if hi_gain != "shared":
+            if kind == "latent":
+                # per-unit HI gain: nested in the chosen fit (s_g -> 0), started at its optimum
+                G = ml(kind, fam, fix_level=not F.get("free_level"), start=F["unpack"](F["r2"].x), nz=nz_best,
+                       gain=True)
+                gain_aic = {"shared": float(F["aic"]), "unit": float(G["aic"])}
+                if hi_gain == "unit" or G["aic"] < F["aic"]:
+                    F = G
+            else:
+                notes.append("per-unit HI gain: latent threshold only; the observable threshold was chosen, so "
+                             "the gain is shared")
         unpack, nll, r, r2 = F["unpack"], F["nll"], F["r"], F["r2"]
         th, ins = unpack(r2.x)
         thr_key = "log_sD" if kind == "latent" else "log_sY"
@@ -1415,6 +1485,7 @@ class LifeModel:
             if ngroups >= 3:
                 prior_txt = ("uniform on every standard deviation (s, s_a, sigma, threshold scatter, tau) and on "
                              "rho" + (" and on the noise's level factor kappa" if "log_kappa" in th else "")
+                             + (" and on the HI gain's scatter s_g" if "log_sg" in th else "")
                              + "; flat on the rest")
 
                 # the between-unit scales' prior (s, s_a, threshold scatter): uniform on the sd (Gelman 2006), or
@@ -1428,7 +1499,8 @@ class LifeModel:
 
                 def log_prior(xs):  # uniform on every standard deviation and on rho, flat on the rest
                     t, i_ = unpack(xs)
-                    return (jb * (t["log_s"] + t["log_sa"] + t[thr_key]) + t["log_sigma"] + t.get("log_kappa", 0.0)
+                    return (jb * (t["log_s"] + t["log_sa"] + t[thr_key] + t.get("log_sg", 0.0)) + t["log_sigma"]
+                            + t.get("log_kappa", 0.0)
                             + sum(v["log_tau"] for v in i_.values())
                             + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
             else:
@@ -1448,6 +1520,7 @@ class LifeModel:
                 def log_prior(xs):
                     t, i_ = unpack(xs)
                     return (hc(t["log_s"], 1.0) + hc(t["log_sa"], hi_scale) + hc(t[thr_key], A_thr)
+                            + (hc(t["log_sg"], 1.0) if "log_sg" in t else 0.0)
                             + t["log_sigma"] + t.get("log_kappa", 0.0) + sum(v["log_tau"] for v in i_.values())
                             + math.log(max(1.0 - math.tanh(t["atanh_rho"]) ** 2, 1e-300)))
 
@@ -1491,6 +1564,10 @@ class LifeModel:
         info["exposure_spread"] = exposure_spread
         # the HI noise model: "constant" (one sigma) or "level" (sigma sqrt(1 + kappa^2 L^2), theta["log_kappa"])
         info["noise"] = nz_best
+        if hi_gain != "shared":  # the HI gain: shared or per unit (theta["log_sg"]) and the two fits' AIC
+            info["hi_gain"] = "unit" if "log_sg" in th else "shared"
+            if gain_aic is not None:
+                info["gain_aic"] = gain_aic
         if scale_prior != "uniform":
             info["scale_prior"] = scale_prior
         if level_aic is not None:
@@ -1832,7 +1909,8 @@ def predict_history(model: LifeModel, u: UnitHistory, *, n_samples: int = 2000, 
 
 
 class _UKF:
-    """Unscented Kalman filter over (z, a) of one unit (static state; y = a + c exp(z) X + e)."""
+    """Unscented Kalman filter over (z, a) of one unit (static state; y = a + c exp(z) X + e); with a per-unit HI
+    gain (``log_sg`` in the model) over (z, a, g), y = a + c (1 + g) exp(z) X + e."""
 
     def __init__(self, model: LifeModel):
         th = model.theta
@@ -1841,9 +1919,10 @@ class _UKF:
         self.kap = math.exp(th["log_kappa"]) if "log_kappa" in th else 0.0  # level-dependent noise
         self.rho = math.tanh(th.get("atanh_rho", 0.0))
         self.prev = None  # (y, X) of the previous finite record: AR(1) residuals are prewhitened
-        self.x = np.array([th["mu"], th["a0"]])
-        self.P = np.diag([math.exp(th["log_s"]) ** 2, math.exp(th["log_sa"]) ** 2])
-        self.cc, self.wm, self.wc = merwe_weights(2)  # state (z, a); alpha 0.5, beta 2, kappa 0
+        sd = [math.exp(th["log_s"]), math.exp(th["log_sa"])] + ([math.exp(th["log_sg"])] if "log_sg" in th else [])
+        self.x = np.array([th["mu"], th["a0"], 0.0][:len(sd)])
+        self.P = np.diag(np.square(sd))
+        self.cc, self.wm, self.wc = merwe_weights(len(sd))  # state (z, a[, g]); alpha 0.5, beta 2, kappa 0
 
     def _lat(self, z: np.ndarray, X: float, E) -> np.ndarray:
         """Latent path at the sigma points: exp(z) X (power law; X = (E/E_ref)^b) or the model's path at E."""
@@ -1875,10 +1954,11 @@ class _UKF:
         rho = self.rho
         pw = self.model.path == "power" or E is None
         kap = self.kap
+        cg = self.c * (1.0 + Xs[:, 2]) if Xs.shape[1] > 2 else self.c  # the unit's HI gain at the sigma points
         if kap:  # level-dependent noise: records scaled by s = sqrt(1 + kappa^2 L^2) at the current mean of z
             sc = lambda X_, E_: 1.0 / math.sqrt(_level_var(kap, float(self._lat(np.array([self.x[0]]), X_, E_)[0])))  # noqa: E731
         if self.prev is None:  # chain start: marginal variance sigma^2 / (1 - rho^2)
-            Z = Xs[:, 1] + (self.c * np.exp(Xs[:, 0]) * X if pw else self.c * self._lat(Xs[:, 0], X, E))
+            Z = Xs[:, 1] + (cg * np.exp(Xs[:, 0]) * X if pw else cg * self._lat(Xs[:, 0], X, E))
             r2, meas = self.sig ** 2 / (1.0 - rho * rho), y
             if kap:
                 w = sc(X, E)
@@ -1886,13 +1966,13 @@ class _UKF:
         elif kap:
             yp, Xp, Ep = self.prev
             w, wp = sc(X, E), sc(Xp, Ep)
-            Z = Xs[:, 1] * (w - rho * wp) + self.c * (self._lat(Xs[:, 0], X, E) * w
-                                                      - rho * wp * self._lat(Xs[:, 0], Xp, Ep))
+            Z = Xs[:, 1] * (w - rho * wp) + cg * (self._lat(Xs[:, 0], X, E) * w
+                                                 - rho * wp * self._lat(Xs[:, 0], Xp, Ep))
             r2, meas = self.sig ** 2, y * w - rho * yp * wp
         else:
             yp, Xp, Ep = self.prev
-            Z = Xs[:, 1] * (1.0 - rho) + (self.c * np.exp(Xs[:, 0]) * (X - rho * Xp) if pw else
-                                          self.c * (self._lat(Xs[:, 0], X, E) - rho * self._lat(Xs[:, 0], Xp, Ep)))
+            Z = Xs[:, 1] * (1.0 - rho) + (cg * np.exp(Xs[:, 0]) * (X - rho * Xp) if pw else
+                                          cg * (self._lat(Xs[:, 0], X, E) - rho * self._lat(Xs[:, 0], Xp, Ep)))
             r2, meas = self.sig ** 2, y - rho * yp
         self.prev = (y, X, E)
         self._correct(Xs, Z, r2, meas)
@@ -1914,7 +1994,7 @@ class _UKF:
 def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time_unit: str = "mission",
              progress: bool = False, n_draws: int = 20, threshold: str = "auto",
              failure_level: float | None = None, path: str = "power", failure_at: str = "interval",
-             noise: str = "constant", exposure_spread: str = "renewal") -> LifeModel:
+             noise: str = "constant", exposure_spread: str = "renewal", hi_gain: str = "shared") -> LifeModel:
     """Fit one model per exposure candidate (same HI data and events) and keep the maximum likelihood one
     (its posterior parameter draws are then computed, ``n_draws``); the log-likelihoods of all candidates go
     into ``fit_info["exposure_candidates"]``."""
@@ -1923,7 +2003,8 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
         try:
             fits[name] = LifeModel.fit(units, exposure=name, feature=feature, time_unit=time_unit, n_draws=0,
                                        threshold=threshold, failure_level=failure_level, path=path,
-                                       failure_at=failure_at, noise=noise, exposure_spread=exposure_spread)
+                                       failure_at=failure_at, noise=noise, exposure_spread=exposure_spread,
+                                       hi_gain=hi_gain)
         except ValueError as e:
             errs[name] = str(e)
             continue
@@ -1936,9 +2017,10 @@ def fit_best(candidates: dict[str, list[UnitHistory]], feature: str = "hi", time
     if n_draws > 0:  # same data and start: the same maximum, now with the parameter posterior
         m = LifeModel.fit(candidates[best], exposure=best, feature=feature, time_unit=time_unit, n_draws=n_draws,
                           threshold=m.threshold, failure_level=failure_level, path=m.path, failure_at=failure_at,
-                          noise=m.fit_info.get("noise", "constant"), exposure_spread=exposure_spread)
+                          noise=m.fit_info.get("noise", "constant"), exposure_spread=exposure_spread,
+                          hi_gain=m.fit_info.get("hi_gain", "shared"))
         m.fit_info["threshold_candidates"] = fits[best].fit_info.get("threshold_candidates")
-        for k in ("noise_aic", "noise_rule"):
+        for k in ("noise_aic", "noise_rule", "gain_aic"):
             if k in fits[best].fit_info:
                 m.fit_info[k] = fits[best].fit_info[k]
         if "path_aic" in fits[best].fit_info:
