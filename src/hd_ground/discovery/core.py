@@ -179,6 +179,10 @@ class Options:
     # re-timed by the acquisition skew identified from the speeds' lag when the fit bags' CV prefers it), "default"
     # (at the logged angle), "retimed" (at the re-timed angle whenever a skew is identified: a diagnosis setting)
     angle_timing: str = "identify"
+    # where a forward step admits no single group: two of the groups the step refused for consistency (both having
+    # reached min_gain alone) admitted together when each passes every test of the step given the other
+    # (_pair_step); False: the selection stops there, the behaviour before that pass
+    pair_step: bool = True
 
 
 @dataclass
@@ -657,7 +661,7 @@ def _pair_step(gram: _BlockGram, base_idx: list[int], groups, selected: list[int
     position; the jackknife Wald rule; its shape identified), and the pair together passes the step's rules
     against the current model; the best such pair by CV error. The standard is the single step's, asked of each
     group beside its partner. Returns (the new selection, its per-block CV SSE) or None."""
-    if len(rejected) < 2 or len(selected) + 2 > opt.max_effects:
+    if not opt.pair_step or len(rejected) < 2 or len(selected) + 2 > opt.max_effects:
         return None
     cur_idx = _model(base_idx, groups, selected)
     fam = {gi: groups[gi][0].family for gi in rejected}
@@ -1526,7 +1530,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         sgn_eps=sgn_eps, fric_spec=fric if isinstance(fric, dict) else None, t_ref=float(np.median(sf["temperature"])) if "temperature" in sf else 25.0,
         orders=orders, declared=set(declared), excluded=excluded,
         eps_range=(lo_eps, hi_eps) if eps_fit is not None else None,
-        short_stroke={v: (float(np.median(sf[v])), float(np.ptp(sf[v]) / 2)) for v in ("theta_m", "theta_f")
+        short_stroke={v: (float(np.median(sf[v])), float(np.ptp(sf[v]) / 2), float(np.min(sf[v])), float(np.max(sf[v])))
+                      for v in ("theta_m", "theta_f")
                       if v in avail and v in excluded and np.ptp(sf[v]) > 0 and "omega_m" not in excluded},
         angle_skew=float(getattr(ds, "angle_skew", 0.0)),
     )
