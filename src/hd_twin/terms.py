@@ -36,6 +36,9 @@ spec                                              value
 ``{"op": "sgn", "var": v, "eps": e}``             sgn(v); tanh(v / e) when e > 0 (smooth, differentiable)
 ``{"op": "abs", "var": v}``                       abs(v)
 ``{"op": "pow", "var": v, "p": p}``               v ** p (odd-symmetric sign(v) abs(v)**p if ``"odd": true``)
+``{"op": "pow", "var": v, "p": p, "ref": r,       (v - r) ** p on [lo, hi], continued linearly beyond (its value and
+   "lo": a, "hi": b}``                            slope at the bound: a function known on the range of the data it
+                                                  was identified on, see :func:`pow_within`)
 ``{"op": "offset", "var": v, "ref": r}``          v - r              (e.g. temperature - T_ref)
 ``{"op": "stribeck", "var": v, "v_s": s,          exp(-(abs(v)/s)**delta) * sgn(v)
    "delta": d, "eps": e}``
@@ -121,6 +124,14 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
                 raise ValueError(f"{where}: {op} with 'skew_s' needs the angle's rate signal in 'rate'")
     elif op == "pow":
         _finite_number(spec.get("p"), f"{where}: 'p' of pow")
+        if "lo" in spec or "hi" in spec:
+            lo = _finite_number(spec.get("lo"), f"{where}: 'lo' of pow")
+            hi = _finite_number(spec.get("hi"), f"{where}: 'hi' of pow")
+            _finite_number(spec.get("ref", 0.0), f"{where}: 'ref' of pow")
+            if not lo < hi:
+                raise ValueError(f"{where}: pow with a range needs lo < hi, got lo={lo}, hi={hi}")
+            if spec.get("odd"):
+                raise ValueError(f"{where}: pow with a range is not odd-symmetric ('odd' and 'lo'/'hi' together)")
     elif op == "offset":
         _finite_number(spec.get("ref", 0.0), f"{where}: 'ref' of offset")
     elif op == "deadzone":
@@ -223,6 +234,8 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
         return xp.abs(x)
     if op == "pow":
         p = float(spec["p"])
+        if "lo" in spec:
+            return pow_within(x, p, float(spec.get("ref", 0.0)), float(spec["lo"]), float(spec["hi"]))
         if spec.get("odd"):
             return xp.sign(x) * xp.abs(x) ** p
         return x**p
@@ -249,6 +262,24 @@ def retimed_angle(theta, rate, skew_s: float):
     twin evaluates it on each incoming sample as discovery does on the log); its error s^2 theta'' / 2 is
     below 0.01 rad of the angle for s = 2.4 ms up to theta'' = 3000 rad/s^2."""
     return theta + skew_s * rate
+
+
+def pow_within(x, p: float, ref: float, lo: float, hi: float):
+    """(x - ref)^p on [lo, hi], continued linearly beyond: b^p + p b^(p-1) (x - b) with b the bound (u = x - ref).
+
+    A smooth function identified as a polynomial over the range of its data (discovery's stand-in for a position
+    effect seen over too short a stroke to show its periodicity) is known there only; its cubic term, free over the
+    range, grows as u^3 beyond it. The continuation is the natural cubic spline's boundary condition (zero curvature
+    beyond the outer knots; Hastie, Tibshirani & Friedman, The Elements of Statistical Learning, 5.2.1: polynomial
+    fits are erratic near the boundaries and extrapolation is dangerous): the least-curved function through the
+    fitted values and slopes at the bounds. Linear in the coefficients (each power continued alike), per sample,
+    and written with abs only (numpy and torch alike)."""
+    b = (x + lo + abs(x - lo)) / 2  # max(x, lo)
+    b = (b + hi - abs(b - hi)) / 2  # min(., hi)
+    ub = b - ref
+    if p == 0:
+        return x * 0.0 + 1.0
+    return ub**p + p * ub ** (p - 1) * (x - b)
 
 
 def _sgn(x, eps: float, xp):

@@ -98,7 +98,7 @@ class LibraryContext:
     declared: set[str] = field(default_factory=set)  # the twin's declared effects (never re-proposed)
     excluded: set[str] = field(default_factory=set)  # names/variables that cannot be identified on these data
     n_pole_pairs_hint: int | None = None
-    short_stroke: dict[str, tuple[float, float]] = field(default_factory=dict)  # angle -> (centre, half range)
+    short_stroke: dict[str, tuple] = field(default_factory=dict)  # angle -> (centre, half range, lo, hi) of the fit data
     eps_range: tuple[float, float] | None = None  # rad/s, search range of the friction transition width
     windup_scale: float = 0.0  # rad, q90 of |w| (twist-side shape ranges)
     windup_noise: float = 0.0  # rad, white-noise sigma of w
@@ -367,21 +367,28 @@ def short_stroke_candidates(ctx: LibraryContext) -> list[Candidate]:
     so such a structure is not taken by a constant bias.
     """
     out: list[Candidate] = []
-    for var, (centre, half) in ctx.short_stroke.items():
+    for var, ss in ctx.short_stroke.items():
+        centre, half = ss[0], ss[1]
+        lo, hi = (ss[2], ss[3]) if len(ss) > 3 else (centre - half, centre + half)
         if var not in ctx.available or half <= 0:
             continue
-        u = {"op": "offset", "var": var, "ref": centre}
-        # with the constant: the mean of such a torque over the stroke is part of it, not a separate bias
-        powers = [{"op": "const"}, u, {"op": "prod", "factors": [u, u]}, {"op": "prod", "factors": [u, u, u]}]
-        variants = [("plain", None, f"p0 + p1 u + p2 u^2 + p3 u^3, u = {var} - {centre:.4g}")]
+        # with the constant: the mean of such a torque over the stroke is part of it, not a separate bias. Each
+        # power is (angle - centre)^k over the fit data's range [lo, hi] and continued linearly beyond it
+        # (hd_twin.terms.pow_within: the function is identified on that range only; a cubic's u^3 beyond it is no
+        # evidence of anything); on the fit rows the columns are the plain powers
+        powers = [{"op": "const"}] + [{"op": "pow", "var": var, "p": float(k), "ref": centre, "lo": lo, "hi": hi}
+                                      for k in (1, 2, 3)]
+        rng = f" on [{lo:.4g}, {hi:.4g}], continued linearly beyond"
+        variants = [("plain", None, f"p0 + p1 u + p2 u^2 + p3 u^3, u = {var} - {centre:.4g}{rng}")]
         if ctx.target == "tau_m" and "omega_m" in ctx.available:
-            variants.append(("sgn", _sgn(ctx), f"(p0 + p1 u + p2 u^2 + p3 u^3) sgn(omega_m), u = {var} - {centre:.4g}"))
+            variants.append(("sgn", _sgn(ctx), f"(p0 + p1 u + p2 u^2 + p3 u^3) sgn(omega_m), u = {var} - {centre:.4g}{rng}"))
         for variant, times, form in variants:
             basis = powers if times is None else [{"op": "prod", "factors": [b, dict(times)]} for b in powers]
             out.append(Candidate(
                 "unknown", f"{var}:smooth", var, None, basis, form,
-                lambda c, h=half: {"p0": float(c[0]), "p1": float(c[1]), "p2": float(c[2]), "p3": float(c[3]),
-                                   "range_half_width": h},
+                lambda c, h=half, lo=lo, hi=hi: {"p0": float(c[0]), "p1": float(c[1]), "p2": float(c[2]),
+                                                 "p3": float(c[3]), "range_half_width": h, "range_lo": lo,
+                                                 "range_hi": hi},
                 requires=(var,) + (("omega_m",) if times else ()), short_stroke=True,
                 level_carrier=dict(times) if times else {"op": "const"},
             ))
