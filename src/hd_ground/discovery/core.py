@@ -1631,8 +1631,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 f"SSE ({float(cv_new.sum()):.4g} vs {float(cv_old.sum()):.4g}); the first selection kept")
     relook: dict = dict(transition_width[4]) if transition_width is not None and len(transition_width) > 4 else {}
     if transition_width is None and eps_fit is not None and not isinstance(fric, dict) and sel:
-        rew, relook = _reidentify_width(y, sig, srows, ds.block, target, avail, declared, extra_terms, twin_params, keep,
-                                        X_all, base_idx, groups, sel, sgn_eps, (lo_eps, hi_eps),
+        rew, relook = _reidentify_width(y, sig, srows, ds.block, target, avail, declared, extra_terms, twin_params,
+                                        keep, X_all, base_idx, groups, sel, sgn_eps, (lo_eps, hi_eps),
                                         filtered=(ds0.t, ds0.segment, alpha_win, sig_w) if opt.width_fit == "filtered"
                                         else None, beside_width_groups=opt.width_second_look == "beside")
         if relook and rew is None:
