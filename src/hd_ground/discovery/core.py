@@ -188,6 +188,11 @@ class Options:
     # reached min_gain alone) admitted together when each passes every test of the step given the other
     # (_pair_step); False: the selection stops there, the behaviour before that pass
     pair_step: bool = True
+    # the tanh width's second look given the selected groups (_reidentify_width) when a selected group re-identifies
+    # the width itself (a Stribeck group replaces the Coulomb column): "beside" (asked given the other selected
+    # groups, the width group left out: it is the width's own alternative, and it fixed only its own columns' width)
+    # or "skip" (not asked, the behaviour before branch disc32)
+    width_second_look: str = "beside"
 
 
 @dataclass
@@ -218,6 +223,10 @@ class SignalResult:
     # per-block leave-one-block-out SSE of the selected model on the fit bags (before the held-out arbiter): the fit
     # data's own measure of the whole model, for comparing settings on the same rows (diagnosis; no rule reads it)
     cv_folds: np.ndarray | None = None
+    # the friction width's second look (_reidentify_width) when it was asked with a width-re-identifying group
+    # (Stribeck) left out of the model: {"without": [groups left out], "eps_first", "eps", "sd", "redone"}; empty
+    # when not asked that way (report.json: signals[].width_second_look)
+    width_second_look: dict = field(default_factory=dict)
     # arrays for plots (held-out scored rows)
     plot: dict = field(default_factory=dict)
 
@@ -1104,7 +1113,7 @@ def moved_shapes(groups, sel: list[int], at_sel: dict) -> dict[int, list[str]]:
 
 def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms, twin_params, keep, X_all,
                       base_idx, groups, sel, eps0: float, rng: tuple[float, float],
-                      filtered: tuple | None = None) -> tuple | None:
+                      filtered: tuple | None = None, beside_width_groups: bool = True) -> tuple[tuple | None, dict]:
     """The friction transition width identified again given the selected groups (CV profile + jackknife).
 
     The width is one parameter of every term on the friction direction: the selected groups' tanh(omega_m /
@@ -1112,14 +1121,39 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
 
     The baseline's width is first identified before any effect is modelled: an undeclared effect several
     times the noise floor is then in the residual and blurs the profile. Given the selected groups' columns
-    the width is searched again over the same range. Returns (eps, sd, note, eps0) when it is identified and
-    differs from ``eps0`` by more than its own SD, else None. Skipped when a selected group re-identifies
-    the width itself (it replaces the baseline's Coulomb column, e.g. Stribeck). ``filtered``: (t_full,
-    segment_full, window_s, speed-noise sigma): the profile is then made on the torque balance filtered as the
-    acceleration is (:func:`identify_width_filtered`, the baseline's first profile's equation), unless its width is
-    within ``WIDTH_RESOLVED_SIGMAS`` speed-noise sigmas (then on the raw columns, as the baseline's)."""
-    if any(getattr(groups[gi][0], "replace_idx", ()) for gi in sel):
-        return None
+    the width is searched again over the same range. Returns ((eps, sd, note, eps0, left out) when it is identified
+    and differs from ``eps0`` by more than its own SD, else None; info), info the gate's trace (empty when no width
+    group was left out). ``filtered``: (t_full, segment_full, window_s, speed-noise sigma): the profile is then made
+    on the torque balance filtered as the acceleration is (:func:`identify_width_filtered`, the baseline's first
+    profile's equation), unless its width is within ``WIDTH_RESOLVED_SIGMAS`` speed-noise sigmas (then on the raw
+    columns, as the baseline's).
+
+    A selected group that re-identifies the width itself (it replaces the baseline's Coulomb column, e.g. Stribeck:
+    T_C tanh(omega_m/eps) + (T_S - T_C) exp(-(|omega_m|/omega_s)^delta) tanh(omega_m/eps), eps profiled with its
+    shape) is left out of this look (``beside_width_groups``; before branch disc32 its presence skipped the look).
+    Why: the width-only model (T_S = T_C) is nested in that group, and the group re-identifies the width of its own
+    columns only, while the other selected friction-direction columns (load-dependent c_L |Q_red| tanh(omega_m /
+    eps0), temperature, sgn-variant harmonics) and the baseline stay at eps0, the width profiled with the undeclared
+    effects in the residual. Admitted against a model at that stale width, the group's CV gain is the width's
+    correction plus its Stribeck curve, and the curve's shape bends to make up the other columns' width (seed 3700
+    plant2 load friction: eps 0.739 with the load term in the residual; the Stribeck group, admitted at +20 % CV,
+    4.6 SE, Wald 123, had eps 2.12, omega_s 3.13, delta 3.0, on a plant with no Stribeck term and v_t = 1.0; the
+    width looked at again given the load term: 1.000 +- 0.008, and the Stribeck group's gain 0.18 %). The width
+    is therefore looked at given the other selected groups, and when it moves, candidates and selection are redone
+    on it: a Stribeck curve then competes against the model at the width the data give beside the other effects,
+    and must earn its own gain (the curve) by the selection's rules; a real one still does (its excess is not a
+    width: the tanh cannot make a rise that decays with speed)."""
+    left = [gi for gi in sel if getattr(groups[gi][0], "replace_idx", ())]
+    info: dict = {}
+    if left:
+        if not beside_width_groups:
+            return None, info
+        info = {"without": [f"{groups[gi][0].name}[{groups[gi][0].family}]" for gi in left], "eps_first": float(eps0)}
+        sel = [gi for gi in sel if gi not in left]
+        if not sel:
+            info["asked"] = False  # no other group: the first profile's model, nothing to look at again
+            return None, info
+        info["asked"] = True
     cols_sel = [c for gi in sel for c in groups[gi][1]]
     s_rows = _take(sig, srows)
     bc = baseline_columns(target, avail, declared, extra_terms, 1.0, twin_params)[0]
@@ -1150,12 +1184,20 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
         f = fit_separable(y[srows], lambda sh: matrix(sh["eps"], s_rows), names, block[srows],
                           [Shape("eps", rng[0], rng[1], log=True, n_grid=12)])
     e1, sd1 = float(f.shape["eps"]), float(f.shape_sd["eps"])
+    if info:
+        info.update(eps=e1, sd=sd1, identified=bool(f.identified["eps"]))
     if not f.identified["eps"] or abs(e1 - eps0) <= sd1:
-        return None
-    note = (f"friction transition width identified again given the selected effects: eps {eps0:.3g} -> {e1:.3g} +- "
-            f"{sd1:.2g} rad/s (CV profile over the same range, block jackknife; the first estimate had the "
+        if info:
+            info["redone"] = False
+        return None, info
+    without = (f", with {', '.join(info['without'])} (which re-identifies the width of its own columns only) left out"
+               if info else "")
+    note = (f"friction transition width identified again given the selected effects{without}: eps {eps0:.3g} -> "
+            f"{e1:.3g} +- {sd1:.2g} rad/s (CV profile over the same range, block jackknife; the first estimate had the "
             "undeclared effects in its residual); candidates and selection redone with it")
-    return e1, sd1, note, float(eps0)
+    if info:
+        info["redone"] = True
+    return (e1, sd1, note, float(eps0), info), info
 
 
 def identify_presliding_filtered(sig: "StateSignals", t_full: np.ndarray, segment_full: np.ndarray, window_s: float,
@@ -1314,6 +1356,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         raise DiscoveryError(f"Options.presliding_fit must be 'filtered' or 'raw', not {opt.presliding_fit!r}")
     if opt.width_fit not in ("filtered", "raw"):
         raise DiscoveryError(f"Options.width_fit must be 'filtered' or 'raw', not {opt.width_fit!r}")
+    if opt.width_second_look not in ("beside", "skip"):
+        raise DiscoveryError(f"Options.width_second_look must be 'beside' or 'skip', not {opt.width_second_look!r}")
     ds0, heldout0 = ds, heldout
     declared = list(DEFAULT_DECLARED.get(target, []) if declared is None else declared)
     extra_terms = list(extra_terms or [])
@@ -1722,11 +1766,20 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
             statements.append(
                 head + f"selection redone with it fixed at its final value gave {names(sel_new)} with a higher fit-block CV "
                 f"SSE ({float(cv_new.sum()):.4g} vs {float(cv_old.sum()):.4g}); the first selection kept")
+    relook: dict = dict(transition_width[4]) if transition_width is not None and len(transition_width) > 4 else {}
     if transition_width is None and eps_fit is not None and not isinstance(fric, dict) and sel:
-        rew = _reidentify_width(y, sig, srows, ds.block, target, avail, declared, extra_terms, twin_params, keep,
-                                X_all, base_idx, groups, sel, sgn_eps, (lo_eps, hi_eps),
-                                filtered=(ds0.t, ds0.segment, alpha_win, sig_w) if opt.width_fit == "filtered"
-                                else None)
+        rew, relook = _reidentify_width(y, sig, srows, ds.block, target, avail, declared, extra_terms, twin_params,
+                                        keep, X_all, base_idx, groups, sel, sgn_eps, (lo_eps, hi_eps),
+                                        filtered=(ds0.t, ds0.segment, alpha_win, sig_w) if opt.width_fit == "filtered"
+                                        else None, beside_width_groups=opt.width_second_look == "beside")
+        if relook and rew is None:
+            trace.append({"step": "width second look", **relook})
+            if relook.get("asked"):
+                statements.append(
+                    f"friction transition width looked at again given the selected effects with "
+                    f"{', '.join(relook['without'])} left out (it re-identifies the width of its own columns only): "
+                    f"eps {relook['eps_first']:.3g} -> {relook['eps']:.3g} +- {relook['sd']:.2g} rad/s, within its SD "
+                    "or not identified; kept")
         if rew is not None:
             # the width was first identified with the undeclared effects still in the residual; given the
             # selected groups it is identified again, and candidates built on it are selected again
@@ -1889,7 +1942,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         signal=target, identifiable=True, statements=statements, declared_before=declared,
         declared_after=declared_after, baseline_params=base_params, refit_baseline_params=refit_params,
         effects=effects, terms=terms, error_before=eb, error_after=ea, spectra=spectra, cv_trace=trace,
-        offsets=offsets, comparisons=comp, plot=plot, cv_folds=cv_folds,
+        offsets=offsets, comparisons=comp, plot=plot, cv_folds=cv_folds, width_second_look=relook,
     )
 
 

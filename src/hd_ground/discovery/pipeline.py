@@ -275,6 +275,9 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
             "baseline_parameters": r.baseline_params, "refit_baseline_parameters": r.refit_baseline_params,
             "terms": r.terms, "angle_offsets": r.offsets, "comparisons": r.comparisons,
             "selection_trace": r.cv_trace,
+            # the friction width's second look with a width-re-identifying group (Stribeck) left out (core.
+            # _reidentify_width; empty: not asked that way)
+            "width_second_look": r.width_second_look,
             "order_spectra": [{"variable": s.variable, "modulator": s.modulator, "peaks": s.peaks,
                                "floor": s.floor, "revolutions": s.revolutions} for s in r.spectra],
             "within_bag": within.get(r.signal),
