@@ -535,6 +535,17 @@ def format_world_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _set_windows(alpha_window: str, retime_window: str) -> None:
+    """Worker initializer: the windows chosen on the command line (module globals) in a spawned process too."""
+    global ALPHA_WINDOW, RETIME_WINDOW
+    ALPHA_WINDOW, RETIME_WINDOW = alpha_window, retime_window
+
+
+def _timed_world_case(w: str, e: str | None, out: str, duration: float, seed: int) -> tuple[dict, float]:
+    t0 = time.perf_counter()
+    return run_world_case(w, e, Path(out), duration=duration, seed=seed), time.perf_counter() - t0
+
+
 def run_worlds(a) -> int:
     from hd_sim.families import FAMILIES
 
@@ -546,15 +557,28 @@ def run_worlds(a) -> int:
         from tests.plants import ema2
 
         cases += [("plant2", None if e == "clean" else e) for e in ema2.EFFECTS]
-    rows, t00 = [], time.perf_counter()
-    for i, (w, e) in enumerate(cases):
-        dur = a.plant2_duration if w == "plant2" else a.duration
-        t0 = time.perf_counter()
-        r = run_world_case(w, e, Path(a.out) / w / (e or "clean"), duration=dur, seed=a.seed)
-        rows.append(r)
+    rows, t00 = [None] * len(cases), time.perf_counter()
+
+    def show(i, w, e, r, dt):
         print(f"[{i + 1}/{len(cases)}] {w} {e or 'clean'}: discover {_short(r['found'])} {r['after']:.4g}/{r['before']:.4g}; "
               f"greedy {_short(r['greedy_found'])} {r['greedy_after']:.4g}/{r['greedy_before']:.4g} "
-              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+              f"({dt:.0f} s)", flush=True)
+
+    args = [(w, e, str(Path(a.out) / w / (e or "clean")), a.plant2_duration if w == "plant2" else a.duration, a.seed)
+            for w, e in cases]
+    if a.jobs > 1:  # one case per worker process (each case is independent); rows kept in case order
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(a.jobs, initializer=_set_windows, initargs=(ALPHA_WINDOW, RETIME_WINDOW)) as ex:
+            futs = {ex.submit(_timed_world_case, *x): i for i, x in enumerate(args)}
+            for f in as_completed(futs):
+                i = futs[f]
+                rows[i], dt = f.result()
+                show(i, cases[i][0], cases[i][1], rows[i], dt)
+    else:
+        for i, x in enumerate(args):
+            rows[i], dt = _timed_world_case(*x)
+            show(i, cases[i][0], cases[i][1], rows[i], dt)
     Path(a.out).mkdir(parents=True, exist_ok=True)
     (Path(a.out) / "bench_discover_worlds.json").write_text(json.dumps(rows, indent=1, default=str))
     print()
@@ -585,6 +609,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="runs/discover_sim")
     ap.add_argument("--cases", default=",".join(c.id for c in CASES))
     ap.add_argument("--seed", type=int, default=100)
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="worlds: cases run in N worker processes (same rows; set OMP_NUM_THREADS=1 with many)")
     ap.add_argument("--plots", action="store_true", help="write discovery's PNGs per case")
     ap.add_argument("--alpha-window", choices=("default", "timing", "identify"), default="identify",
                     help="worlds: the motor acceleration's derivative window for discover and greedy alike")
