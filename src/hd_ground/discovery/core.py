@@ -2164,6 +2164,20 @@ def _identified_against(sse_ref: np.ndarray, sse: np.ndarray, opt: Options,
     return gain, folds, t_pair, why
 
 
+def _window_cv_setup(ds: Dataset, heldout: np.ndarray, opt: Options):
+    """What a derivative-window choice compares against: the sample period, the standstill rows and the plain tau_m
+    baseline's per-block CV on the fit bags at the default window; None when either cannot be had."""
+    t = ds.t[ds.bag == ds.bag[0]]
+    dt = float(np.median(np.diff(t))) if len(t) > 2 else 0.0
+    if not dt > 0:
+        return None
+    still, _ = standstill_rows(ds, opt.standstill_sigmas)
+    base = baseline_cv_folds(ds, heldout, ~still)
+    if base is None:
+        return None
+    return (dt, still) + tuple(base)
+
+
 def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | None = None,
                         default_s: float = DEFAULT_ALPHA_WINDOW_S, mode: str | None = None) -> tuple[Dataset, str]:
     """The motor acceleration's timing (and, ``mode="identify"``, its derivative window), chosen on the fit bags.
@@ -2193,15 +2207,10 @@ def choose_alpha_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | N
     mode = opt.alpha_window if mode is None else mode
     if mode not in ("timing", "identify"):
         return ds, ""
-    t = ds.t[ds.bag == ds.bag[0]]
-    dt = float(np.median(np.diff(t))) if len(t) > 2 else 0.0
-    if not dt > 0:
+    setup = _window_cv_setup(ds, heldout, opt)
+    if setup is None:
         return ds, ""
-    still, _ = standstill_rows(ds, opt.standstill_sigmas)
-    base = baseline_cv_folds(ds, heldout, ~still)
-    if base is None:
-        return ds, ""
-    sse_d, cv_d = base
+    dt, still, sse_d, cv_d = setup
     wins = [default_s] + ([k * dt for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]
                           if mode == "identify" else [])
     longest = max(wins)
@@ -2262,15 +2271,10 @@ def choose_retime_window(make, ds: Dataset, heldout: np.ndarray, opt: Options | 
     opt = opt or Options()
     if opt.retime_window != "identify" or not ds.speed_lags:
         return ds, ""
-    t = ds.t[ds.bag == ds.bag[0]]
-    dt = float(np.median(np.diff(t))) if len(t) > 2 else 0.0
-    if not dt > 0:
+    setup = _window_cv_setup(ds, heldout, opt)
+    if setup is None:
         return ds, ""
-    still, _ = standstill_rows(ds, opt.standstill_sigmas)
-    base = baseline_cv_folds(ds, heldout, ~still)
-    if base is None:
-        return ds, ""
-    sse_d, cv_d = base
+    dt, still, sse_d, cv_d = setup
     wins = [round(k * dt, 12) for k in (5, 9, 17, 33) if abs(k * dt - default_s) >= 0.5 * dt]
     longest = max(wins + [default_s])
     cands = [(cv_d, default_s, ds, sse_d)]
