@@ -45,6 +45,8 @@ spec                                              value
 ``{"op": "exp_decay", "var": v, "v_s": s,         exp(-(abs(v)/s)**delta)
    "delta": d}``
 ``{"op": "deadzone", "var": v, "width": d}``      sgn(v) max(abs(v) - d, 0)   (lost motion of half-width d)
+``{"op": "within", "var": v, "width": d}``        1 where abs(v) < d, 0 where abs(v) > d (1/2 at d): inside that lost
+                                                  motion, no contact (1 - the dead zone's slope)
 ``{"op": "prod", "factors": [spec, ...]}``        product of the factors
 ================================================  =============================================
 
@@ -81,7 +83,8 @@ CATALOG_NAMES = (
     "motor_thermal_drift",
 )
 TARGET_SIGNALS = ("tau_m", "Q_red")
-BASIS_OPS = ("const", "var", "sin", "cos", "sgn", "abs", "pow", "offset", "stribeck", "exp_decay", "deadzone", "prod")
+BASIS_OPS = ("const", "var", "sin", "cos", "sgn", "abs", "pow", "offset", "stribeck", "exp_decay", "deadzone", "within",
+             "prod")
 
 # ---------------------------------------------------------------------------
 # validation
@@ -134,9 +137,9 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
                 raise ValueError(f"{where}: pow with a range is not odd-symmetric ('odd' and 'lo'/'hi' together)")
     elif op == "offset":
         _finite_number(spec.get("ref", 0.0), f"{where}: 'ref' of offset")
-    elif op == "deadzone":
-        if _finite_number(spec.get("width"), f"{where}: 'width' of deadzone") < 0:
-            raise ValueError(f"{where}: deadzone needs width >= 0, got {spec.get('width')}")
+    elif op in ("deadzone", "within"):
+        if _finite_number(spec.get("width"), f"{where}: 'width' of {op}") < 0:
+            raise ValueError(f"{where}: {op} needs width >= 0, got {spec.get('width')}")
     elif op in ("stribeck", "exp_decay"):
         s = _finite_number(spec.get("v_s"), f"{where}: 'v_s' of {op}")
         d = _finite_number(spec.get("delta", 1.0), f"{where}: 'delta' of {op}")
@@ -244,6 +247,8 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
     if op == "deadzone":
         a = xp.abs(x) - float(spec["width"])
         return xp.sign(x) * (a + xp.abs(a)) / 2
+    if op == "within":
+        return (1.0 - xp.sign(xp.abs(x) - float(spec["width"]))) / 2
     if op in ("stribeck", "exp_decay"):
         s, d = float(spec["v_s"]), float(spec.get("delta", 1.0))
         decay = xp.exp(-((xp.abs(x) / s) ** d))

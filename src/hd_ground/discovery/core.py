@@ -783,7 +783,8 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         fams_sel = {groups[g][0].family for g in selected}
         for gi, (cand, cols) in enumerate(groups):
             if cand.family in fams_used or cand.family in fams_skip \
-                    or (getattr(cand, "after", None) and cand.after not in fams_sel):
+                    or (getattr(cand, "after", None) and cand.after not in fams_sel) \
+                    or not _premise_holds(gram, cur_idx, groups, selected, getattr(cand, "needs_positive", None)):
                 continue
             if cand.shapes and reshape is not None and not reshape(gi, cur_idx):
                 continue
@@ -925,6 +926,20 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             cur = e
             changed = True
     return selected, trace
+
+
+def _premise_holds(gram: _BlockGram, cur_idx: list[int], groups, selected: list[int],
+                   need: tuple[str, int] | None) -> bool:
+    """A candidate's premise (``Candidate.needs_positive`` = (family, column)): that family is selected and the
+    coefficient of that column of its group is positive in the current model ``cur_idx``. True without a premise."""
+    if need is None:
+        return True
+    fam, j = need
+    for g in selected:
+        cand, cols = groups[g]
+        if cand.family == fam and cols[j] in cur_idx:
+            return bool(gram.coef(cur_idx)[cur_idx.index(cols[j])] > 0)
+    return False
 
 
 def confounded_swap(gram: _BlockGram, base_idx: list[int], groups, selected: list[int], gi: int, cur: np.ndarray,

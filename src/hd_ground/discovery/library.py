@@ -60,14 +60,21 @@ class Candidate:
     nuisance: tuple[str, ...] = ()  # shapes re-identified with the group whose identification does not decide
     replaces: tuple[str, ...] = ()  # baseline parameters whose columns the group replaces (e.g. "T_C")
     after: str | None = None  # a refinement: competes only once this family is selected (e.g. the next order)
+    # (family, column): competes only while that family is selected with a positive coefficient on that column of its
+    # group in the current model (a premise of the reading, e.g. a lost motion: the spring engages outside its width)
+    needs_positive: tuple[str, int] | None = None
     # a function of a position (an angle) times this factor ({"op": "const"} for none): the group must also lower
     # the CV error with a level of the factor per block as a nuisance (core.within_block_sse), i.e. by the angle's
     # motion within blocks, not by levels between blocks where the angle stands still (None: not tested)
     level_carrier: dict | None = None
+    # the level carrier at a shape, for a group whose factor has a shape parameter (``set_shape`` rebuilds it)
+    make_carrier: Callable[[dict], dict] | None = field(repr=False, default=None)
 
     def set_shape(self, shape: dict, sd: dict | None = None) -> None:
-        """Fix the shape parameters (and record their SDs): rebuilds ``basis``."""
+        """Fix the shape parameters (and record their SDs): rebuilds ``basis`` (and the level carrier)."""
         self.basis = self.make_basis(shape)
+        if self.make_carrier is not None:
+            self.level_carrier = self.make_carrier(shape)
         self.nonlinear.update({k: float(v) for k, v in shape.items()})
         for k, v in (sd or {}).items():
             self.nonlinear[f"{k}_sd"] = float(v)
@@ -320,7 +327,40 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                     _harm_params("K_b", k), requires=(var, "windup"),
                     level_carrier={"op": "pow", "var": "windup", "p": 2.0},
                 ))
+                if ctx.windup_scale > 0:
+                    out.append(_contact_ripple(ctx, var, k, fam, pair, at))
     return out
+
+
+def _contact_ripple(ctx: LibraryContext, var: str, k: float, fam: str, pair, at: str) -> Candidate:
+    """The ripple's refinement for a transmission with lost motion: no ripple inside the dead zone.
+
+    A position error e(theta) acts inside the spring, Q = f(w - e) ~ f(w) - f'(w) e: through the torsion law's local
+    stiffness. A law with lost motion of half-width j has f' = 0 for |w| < j (no tooth contact, PHYSICS.md 2.2), so
+    the kinematic error's torque ripple vanishes there: K e(theta) 1[|w| > j] = K e(theta) - K e(theta) 1[|w| < j].
+    This group is the second part, ``B_k sin(k theta + psi) 1[|w| < j]``: it joins the plain ripple (a refinement,
+    competing only once the plain ripple is selected, and only beside a selected lost motion whose spring engages
+    outside its width, K_j > 0: its premise; B_k = -A_k for a ripple that vanishes inside the dead zone) and
+    its width j is identified by the CV profile over the twist's range, as the dead zone's own width is
+    (``twist_shape_candidates``), never assumed equal to it; the data decide (CV, within-block, Wald, shape)."""
+    w_lo = max(ctx.windup_noise, 1e-4 * ctx.windup_scale, 1e-12)
+    w_hi = max(0.6 * ctx.windup_scale, 4 * w_lo)
+    j0 = float(np.sqrt(w_lo * w_hi))
+    ks = _kstr(k)
+
+    def inside(sh):
+        return {"op": "within", "var": "windup", "width": float(sh["j"])}
+
+    return Candidate(
+        _periodic_name(ctx.target, var, k, "plain"), f"{fam}:contact", var, float(k),
+        pair(k, inside({"j": j0})),
+        f"K c_{ks} sin({ks} {var} + psi_{ks}) 1[|w| < j], w = theta_m/N - theta_f (the ripple inside a lost motion "
+        "of half-width j, where no teeth are in contact: c = -A for a ripple that vanishes there)" + at,
+        _harm_params("K_c", k), requires=(var, "windup"), after=fam, needs_positive=("backlash", 0),
+        nonlinear={"j": j0}, shapes=[Shape("j", w_lo, w_hi, log=True, n_grid=12)],
+        make_basis=lambda sh: pair(k, inside(sh)),
+        level_carrier=inside({"j": j0}), make_carrier=inside,
+    )
 
 
 # ---------------------------------------------------------------------------
