@@ -40,6 +40,7 @@ spec                                              value
    "lo": a, "hi": b}``                            slope at the bound: a function known on the range of the data it
                                                   was identified on, see :func:`pow_within`)
 ``{"op": "offset", "var": v, "ref": r}``          v - r              (e.g. temperature - T_ref)
+``{"op": "expm1", "var": v, "k": k, "ref": r}``   exp(k (v - r)) - 1 (e.g. Reynolds' viscosity law in temperature)
 ``{"op": "stribeck", "var": v, "v_s": s,          exp(-(abs(v)/s)**delta) * sgn(v)
    "delta": d, "eps": e}``
 ``{"op": "exp_decay", "var": v, "v_s": s,         exp(-(abs(v)/s)**delta)
@@ -84,7 +85,7 @@ CATALOG_NAMES = (
 )
 TARGET_SIGNALS = ("tau_m", "Q_red")
 BASIS_OPS = ("const", "var", "sin", "cos", "sgn", "abs", "pow", "offset", "stribeck", "exp_decay", "deadzone", "within",
-             "prod")
+             "expm1", "prod")
 
 # ---------------------------------------------------------------------------
 # validation
@@ -137,6 +138,9 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
                 raise ValueError(f"{where}: pow with a range is not odd-symmetric ('odd' and 'lo'/'hi' together)")
     elif op == "offset":
         _finite_number(spec.get("ref", 0.0), f"{where}: 'ref' of offset")
+    elif op == "expm1":
+        _finite_number(spec.get("k"), f"{where}: 'k' of expm1")
+        _finite_number(spec.get("ref", 0.0), f"{where}: 'ref' of expm1")
     elif op in ("deadzone", "within"):
         if _finite_number(spec.get("width"), f"{where}: 'width' of {op}") < 0:
             raise ValueError(f"{where}: {op} needs width >= 0, got {spec.get('width')}")
@@ -244,6 +248,8 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
         return x**p
     if op == "offset":
         return x - float(spec.get("ref", 0.0))
+    if op == "expm1":
+        return xp.exp(float(spec["k"]) * (x - float(spec.get("ref", 0.0)))) - 1.0
     if op == "deadzone":
         a = xp.abs(x) - float(spec["width"])
         return xp.sign(x) * (a + xp.abs(a)) / 2
