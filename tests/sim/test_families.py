@@ -18,12 +18,24 @@ from hd_sim import EffectSet, sample_population, simulate_mission
 from hd_sim.effects import LAW_SLOTS, REGISTRY
 
 # sha256 of a short mission's contract signals, recorded with the code before the laws were switchable
-# (commit a459c52); the default plant must stay bit-for-bit reproducible.
-DEFAULT_CHECKSUMS = {
-    "default": "b043c34f56089b2d243e737fe92607b820bc5cc67fb627f538146e4c0caf862e",
-    "pop_worn": "0cbe15640048c56ffe47c75b833aa565aa2488f2f3529dd2b53abbe7ce40623b",
-    "baseline": "d58050dd1774faec13866ee3996b05da96f8993ae663231f05c31ee355e0639f",
-}
+# (commit a459c52); the default plant must stay bit-for-bit reproducible. Bit patterns depend on the floating-point
+# platform, not only on the code: session 12's machine (AMD EPYC, AVX2 without AVX-512, numpy 2.4.6, numba 0.68.1)
+# gives other digests for the same code (hd_sim unchanged since a459c52's checksums passed; commit 70bed32 fails
+# there too; numpy's SIMD paths for transcendental functions differ between AVX-512 and AVX2 CPUs, OpenBLAS and
+# numba target choices did not reproduce the old digests). One digest per recorded platform: a code change moves
+# every one of them.
+DEFAULT_CHECKSUMS_BY_PLATFORM = [
+    {  # the machines of sessions 1-11 (the digests of a459c52)
+        "default": "b043c34f56089b2d243e737fe92607b820bc5cc67fb627f538146e4c0caf862e",
+        "pop_worn": "0cbe15640048c56ffe47c75b833aa565aa2488f2f3529dd2b53abbe7ce40623b",
+        "baseline": "d58050dd1774faec13866ee3996b05da96f8993ae663231f05c31ee355e0639f",
+    },
+    {  # AMD EPYC, AVX2 (session 12), the same code
+        "default": "74c876882e9a2fe2315cbac5d83cd4fc065d0cc9053a6039022b888368a06ea3",
+        "pop_worn": "d6e4d34ff9ba17c39798ab8f3d4b2a864022071d2140ec6db310b34990c7a567",
+        "baseline": "0ee6bf735cb0cfa22bf0bab9cb5f55f7088fb8efc961c62925f5ce16e6ad0bf9",
+    },
+]
 
 
 def mission_checksum(m) -> str:
@@ -37,14 +49,19 @@ def mission_checksum(m) -> str:
 
 
 def test_default_plant_bit_for_bit_reproducible():
+    got = {}
     m, _ = simulate_mission(None, None, "inspection", 3, duration=1.0)
-    assert mission_checksum(m) == DEFAULT_CHECKSUMS["default"]
+    got["default"] = mission_checksum(m)
     p = sample_population(2, seed=5)[1]
     m, _ = simulate_mission(p, EffectSet.default(), "flight", 11, duration=1.0,
                             health={"h_plus": 20e-6, "h_minus": 18e-6})
-    assert mission_checksum(m) == DEFAULT_CHECKSUMS["pop_worn"]
+    got["pop_worn"] = mission_checksum(m)
     m, _ = simulate_mission(None, EffectSet.baseline(), "step", 2, duration=1.0)
-    assert mission_checksum(m) == DEFAULT_CHECKSUMS["baseline"]
+    got["baseline"] = mission_checksum(m)
+    # all three digests of one recorded platform (a mix would be a code change that one mission does not show)
+    assert got in DEFAULT_CHECKSUMS_BY_PLATFORM, got
+    m2, _ = simulate_mission(None, EffectSet.baseline(), "step", 2, duration=1.0)
+    assert mission_checksum(m2) == got["baseline"]  # and bit-for-bit repeatable on this machine
 
 
 # ---------------------------------------------------------------------------------------------
