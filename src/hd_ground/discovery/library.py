@@ -228,6 +228,7 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
     # whichever explains the data better by more than the tie margin, Reynolds' on a tie. beta is reported with its
     # SD, never a reason to reject the family (a short temperature span only bounds it); the coefficients decide.
     tref = {"op": "offset", "var": "temperature", "ref": ctx.t_ref}
+
     def reynolds_basis(sh):
         e = {"op": "expm1", "var": "temperature", "k": -float(sh["beta"]), "ref": ctx.t_ref}
         return [{"op": "prod", "factors": [{"op": "var", "var": "omega_m"}, e]},
@@ -357,6 +358,13 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
     return out
 
 
+def _twist_range(ctx: LibraryContext) -> tuple[float, float]:
+    """The range a twist-side width is searched over [rad]: from the twist's noise (or 1e-4 of its scale) to 0.6 of
+    its scale (q90 of |w|)."""
+    w_lo = max(ctx.windup_noise, 1e-4 * ctx.windup_scale, 1e-12)
+    return w_lo, max(0.6 * ctx.windup_scale, 4 * w_lo)
+
+
 def _contact_ripple(ctx: LibraryContext, var: str, k: float, fam: str, pair, at: str) -> Candidate:
     """The ripple's refinement for a transmission with lost motion: no ripple inside the dead zone.
 
@@ -368,8 +376,7 @@ def _contact_ripple(ctx: LibraryContext, var: str, k: float, fam: str, pair, at:
     outside its width, K_j > 0: its premise; B_k = -A_k for a ripple that vanishes inside the dead zone) and
     its width j is identified by the CV profile over the twist's range, as the dead zone's own width is
     (``twist_shape_candidates``), never assumed equal to it; the data decide (CV, within-block, Wald, shape)."""
-    w_lo = max(ctx.windup_noise, 1e-4 * ctx.windup_scale, 1e-12)
-    w_hi = max(0.6 * ctx.windup_scale, 4 * w_lo)
+    w_lo, w_hi = _twist_range(ctx)
     j0 = float(np.sqrt(w_lo * w_hi))
     ks = _kstr(k)
 
@@ -466,8 +473,7 @@ def twist_shape_candidates(ctx: LibraryContext) -> list[Candidate]:
     if ctx.target != "Q_red" or "windup" not in ctx.available or ctx.windup_scale <= 0:
         return []
     out = []
-    w_lo = max(ctx.windup_noise, 1e-4 * ctx.windup_scale, 1e-12)
-    w_hi = max(0.6 * ctx.windup_scale, 4 * w_lo)
+    w_lo, w_hi = _twist_range(ctx)
 
     def dz_basis_diff(sh):
         # with the baseline's K w (and a cubic k3 w^3 if selected) these span K dz(w) + k3 dz(w)^3: the
