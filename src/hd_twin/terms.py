@@ -242,14 +242,17 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
     if op == "pow":
         p = float(spec["p"])
         if "lo" in spec:
-            return pow_within(x, p, float(spec.get("ref", 0.0)), float(spec["lo"]), float(spec["hi"]))
-        if spec.get("odd"):
-            return xp.sign(x) * xp.abs(x) ** p
-        return x**p
+            v = pow_within(x, p, float(spec.get("ref", 0.0)), float(spec["lo"]), float(spec["hi"]))
+        elif spec.get("odd"):
+            v = xp.sign(x) * xp.abs(x) ** p
+        else:
+            v = x**p
+        return _finite_where_input_is(v, x, xp, where, f"pow with p={p:g}")
     if op == "offset":
         return x - float(spec.get("ref", 0.0))
     if op == "expm1":
-        return xp.exp(float(spec["k"]) * (x - float(spec.get("ref", 0.0)))) - 1.0
+        k, ref = float(spec["k"]), float(spec.get("ref", 0.0))
+        return _finite_where_input_is(xp.exp(k * (x - ref)) - 1.0, x, xp, where, f"expm1 with k={k:g}, ref={ref:g}")
     if op == "deadzone":
         a = xp.abs(x) - float(spec["width"])
         return xp.sign(x) * (a + xp.abs(a)) / 2
@@ -262,6 +265,25 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
             return decay
         return decay * _sgn(x, float(spec.get("eps", 0.0)), xp)
     raise ValueError(f"{where}: unknown basis op {op!r}")  # pragma: no cover (validated)
+
+
+def _finite_where_input_is(v, x, xp, where: str, what: str):
+    """``v`` unchanged, or ``ValueError`` naming the basis where it is not finite on a finite input.
+
+    The two ops whose value can leave the reals from finite parameters and finite signals: ``expm1`` overflows
+    where k (v - ref) exceeds ~709 (a hostile or mis-scaled k in a model file), and ``pow`` gives NaN on a
+    negative base with a fractional exponent and inf at 0 with a negative one. Their value would otherwise
+    reach a residual, a fault flag or a training loss as inf/NaN, silently. A non-finite input (a dropout)
+    stays the caller's: only samples where ``x`` is finite are checked."""
+    bad = xp.isfinite(x) & ~xp.isfinite(v)
+    if bool(bad.any()):
+        flat, xs = bad.reshape(-1), x.reshape(-1)
+        idx = int(np.flatnonzero(flat)[0]) if xp is np else int(flat.nonzero()[0, 0])
+        total = flat.size if xp is np else flat.numel()
+        raise ValueError(f"{where}: {what} is not finite on {int(flat.sum())} of {total} samples with finite "
+                         f"input (first at input {float(xs[idx]):.6g}); the term's parameters do not fit the "
+                         "signal's range")
+    return v
 
 
 def retimed_angle(theta, rate, skew_s: float):

@@ -90,6 +90,42 @@ def test_bad_terms_are_refused_with_a_clear_message(bad, msg):
         evaluate_terms([bad], _signals())
 
 
+@pytest.mark.parametrize(
+    "basis, signals, msg",
+    [
+        # a hostile Reynolds rate: exp(1e4 (T - 20)) overflows on every warm sample
+        ({"op": "expm1", "var": "temperature", "k": 1e4, "ref": 20.0}, None, "expm1 with k=10000"),
+        # a fractional power of a signed speed: NaN on every reverse sample
+        ({"op": "pow", "var": "omega_m", "p": 0.5}, None, "pow with p=0.5"),
+        # a negative power at standstill: inf
+        ({"op": "pow", "var": "omega_m", "p": -1.0}, {"omega_m": np.array([1.0, 0.0, 2.0])}, "1 of 3 samples"),
+    ],
+)
+def test_a_term_that_leaves_the_reals_on_finite_signals_is_refused_by_name(basis, signals, msg):
+    """A model file whose parameters pass validation but overflow on the data (expm1 with a huge rate, a
+    fractional or negative power where the signal is negative or zero) is an error naming the term and the op,
+    in numpy and in torch, never an inf/NaN prediction passed on to residuals, flags or a training loss."""
+    s = signals or _signals()
+    t = [{"name": "reynolds_viscosity", "signal": "tau_m", "basis": [basis], "coef": [1.0]}]
+    with pytest.raises(ValueError, match=msg) as e:
+        evaluate_terms(t, s)
+    assert "reynolds_viscosity" in str(e.value)
+    torch = pytest.importorskip("torch")
+    with pytest.raises(ValueError, match=msg):
+        evaluate_terms(t, {k: torch.tensor(v) for k, v in s.items()}, xp=torch)
+
+
+def test_a_dropout_in_the_input_stays_the_callers_and_a_sane_term_is_unchanged():
+    """Only finite inputs are checked: a NaN sample (a dropout) passes through as NaN; a rate that fits the
+    signal's range evaluates as the formula."""
+    t = [make_term("reynolds_viscosity", "tau_m", [{"op": "expm1", "var": "temperature", "k": -0.03, "ref": 20.0}],
+                   [0.5])]
+    T = np.array([20.0, np.nan, 50.0])
+    out = evaluate_terms(t, {"temperature": T})
+    assert np.isnan(out[1])
+    np.testing.assert_allclose(out[[0, 2]], 0.5 * np.expm1(-0.03 * (T[[0, 2]] - 20.0)), rtol=1e-12)
+
+
 def test_missing_signal_names_term_and_signal():
     t = [make_term("cogging_torque", "tau_m", sin_cos_pair("theta_e", 6), [1, 0])]
     with pytest.raises(KeyError, match="theta_e"):
