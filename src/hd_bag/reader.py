@@ -468,6 +468,18 @@ def _limit_check(raw: _Raw, topic: str, name: str, v: np.ndarray, index: np.ndar
 SPEED_SCALE_BAND = (0.25, 4.0)
 
 
+def _angle_resolution(theta: np.ndarray) -> float:
+    """The angle's quantisation step [rad] as the log shows it: the smallest sample-to-sample change that recurs
+    (the 5th percentile of the nonzero |differences|), 0 for an analogue (continuous-valued) angle, whose
+    differences have no floor and whose 5th percentile sits far below its typical step. Only an encoder whose
+    log repeats values (>= 20 % of the differences exactly 0) is read as quantised."""
+    dth = np.abs(np.diff(theta[np.isfinite(theta)]))
+    if dth.size < 20 or np.mean(dth == 0) < 0.2:
+        return 0.0
+    nz = dth[dth > 0]
+    return float(np.percentile(nz, 5)) if nz.size else 0.0
+
+
 def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: float) -> None:
     """Cross-signal checks that catch unit and sign errors of other tools (validate errors, notes).
 
@@ -488,7 +500,11 @@ def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: fl
         ok = np.isfinite(d) & np.isfinite(om)
         if ok.sum() < 50:
             continue
-        mov = ok & (np.abs(d) > 0.1 * np.percentile(np.abs(d[ok]), 95))
+        # moving: above a tenth of the mission's own speed range and above the angle's resolution floor (a held or
+        # parked axis whose encoder toggles between two counts has a difference quotient of pure quantisation: the
+        # speed reads ~0 there, the quotient +-q / 10 ms, and their ratio is no statement about units)
+        floor = 3.0 * _angle_resolution(M[:, c_th]) / float(np.median(t[L:] - t[:-L]))
+        mov = ok & (np.abs(d) > max(0.1 * np.percentile(np.abs(d[ok]), 95), floor))
         if mov.sum() < 50 or not np.any(d[mov]):
             continue
         k = float(np.sum(d[mov] * om[mov]) / np.sum(d[mov] ** 2))
