@@ -579,6 +579,85 @@ def _gear_ratio_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, 
     return False
 
 
+#: a jump is a wrap when, after removing the motion its speed explains, it is a whole number of turns to within this [rad]
+WRAP_TOL = 0.5
+
+
+def _unwrap_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: float | None) -> None:
+    """An angle logged within one turn (a single-turn encoder, modulo 2 pi; contract: unwrapped) is unwrapped, with a
+    note; one whose jumps the speed cannot explain as whole turns is reported, not changed.
+
+    Symptom and test, per angle (theta_m with omega_m, theta_f with omega_f), asked only where some step between
+    neighbouring samples exceeds pi: the samples stay inside one window of 2 pi, and every step that the logged speed
+    does not explain (the trapezoid of the two speeds over the step, to within :data:`WRAP_TOL`) is a whole number
+    k != 0 of turns to within :data:`WRAP_TOL`. Then each
+    such step loses 2 pi k (what a logger that unwrapped would have written). A wrapped angle read as it is would make
+    the gear-ratio check blame the metadata ("theta_m / theta_f = 6.6") and the speed check the units ("omega_m is
+    0.005 x the time derivative"), and every position effect would see the jumps. In place, on ``M``.
+
+    The turn a wrapped log starts in is lost; with the gear ratio ``N`` the unwrapped angle is moved by whole turns to
+    the other encoder's (theta_m = N theta_f up to the twist, which is far below a turn on either side), so the twist
+    stays meaningful; without ``N`` it is left as the log's first turn."""
+    n = len(t)
+    unwrapped = []
+    if n < 3:
+        return
+    two_pi = 2.0 * math.pi
+    for c_th, c_om, th_name, om_name in ((0, 2, "theta_m", "omega_m"), (1, 3, "theta_f", "omega_f")):
+        th = M[:, c_th]
+        fin = np.flatnonzero(np.isfinite(th))
+        if len(fin) < 3:
+            continue
+        x = th[fin]
+        step = np.diff(x)
+        jump = np.flatnonzero(np.abs(step) > math.pi)
+        if not len(jump):
+            continue
+        # every step the speed does not explain (to WRAP_TOL) is examined, not only those beyond pi: a re-zeroed
+        # encoder's step of 2 rad in a wrapped log is no whole turn and makes the log not a plain single-turn one
+        # (steps across a dropout, where the speed's trapezoid is no measure of the motion, only when beyond pi)
+        om, tt = M[fin, c_om], t[fin]
+        dts = np.diff(tt)
+        moved_all = 0.5 * (om[:-1] + om[1:]) * dts
+        unexplained = np.abs(step - moved_all) > WRAP_TOL
+        unexplained &= dts <= 1.5 * float(np.median(dts))
+        jump = np.union1d(jump, np.flatnonzero(unexplained))
+        moved = moved_all[jump]
+        k = np.rint((step[jump] - moved) / two_pi)
+        resid = step[jump] - moved - two_pi * k
+        wraps = np.isfinite(resid) & (k != 0) & (np.abs(resid) < WRAP_TOL)
+        bounded = float(np.ptp(x)) <= two_pi * (1.0 + 1e-6) + WRAP_TOL
+        if bounded and wraps.all():
+            turns = np.zeros(len(step))
+            turns[jump] = k
+            x = x - two_pi * np.concatenate([[0.0], np.cumsum(turns)])
+            M[fin, c_th] = x
+            msg = (f"{th_name} is logged within one turn (modulo 2 pi; contract: unwrapped): {len(jump)} steps of a whole "
+                   f"turn that {om_name} does not show; unwrapped (each such step less 2 pi k, k from the step less the "
+                   f"motion {om_name} explains)")
+            unwrapped.append(c_th)
+            raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg, "warning"))
+            rep.notes.append(msg)
+        elif wraps.any():
+            msg = (f"{th_name} steps by more than {om_name} explains {len(jump)} times, {int(wraps.sum())} of them by "
+                   f"whole turns (a log within one turn?), but " +
+                   ("not all" if bounded else f"the angle spans {float(np.ptp(x)):.4g} rad, more than one turn") +
+                   ": not a plain single-turn log, left as read (contract: unwrapped)")
+            raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg))
+            rep.notes.append(msg)
+            rep.suspect.append(msg)
+    if unwrapped and N:
+        c = 0 if 0 in unwrapped else 1  # theta_m moved to theta_f's turn when it was wrapped, else theta_f to theta_m's
+        gap = N * M[:, 1] - M[:, 0] if c == 0 else M[:, 0] / N - M[:, 1]
+        gap = gap[np.isfinite(gap)]
+        if len(gap):
+            turns = float(np.rint(np.median(gap) / (2.0 * math.pi)))
+            if turns:
+                M[:, c] += 2.0 * math.pi * turns
+                rep.notes.append(f"{JOINT_SIGNALS[c]}: moved by {turns:+.0f} turns to the other encoder's turn "
+                                 f"(N = {N:g}; a wrapped log does not say which turn it started in)")
+
+
 def _spike_check(raw: _Raw, rep: ReadReport, M: np.ndarray, index: np.ndarray) -> None:
     """Bags without a CRC (unchunked, or chunk CRC 0): isolated samples that leave the line through
     their neighbours by more than :data:`SPIKE_SIGMAS` robust sigmas of the steps while the neighbours
@@ -710,6 +789,7 @@ def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
                          f"report.gaps; not interpolated; {int(big.sum())} gaps longer than "
                          f"{MAX_INTERP_GAP_SAMPLES} samples split the mission into {int(segment[-1]) + 1} segments")
     rep.nominal_dt = dt
+    _unwrap_check(raw, rep, (s - s[0]) * 1e-9, M, float(meta.gear_ratio) if meta is not None else None)
     if raw.scan.n_loose or raw.scan.n_unchecked:
         _spike_check(raw, rep, M, index[order][keep])
     ratio_ok = meta is not None and _gear_ratio_check(raw, rep, (s - s[0]) * 1e-9, M, float(meta.gear_ratio))

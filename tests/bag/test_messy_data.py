@@ -197,3 +197,47 @@ def test_a_parked_axis_toggling_between_encoder_counts_is_not_read_as_a_unit_err
     p2 = _write(tmp_path / "rpm.mcap", mv, _stamps(mv), omega_f=mv.omega_f * 60 / (2 * np.pi))
     rep2 = read_mission(p2).report
     assert any("omega_f" in s and "in rpm?" in s for s in rep2.suspect), rep2.suspect
+
+
+def _wrap(x):
+    return np.mod(x + np.pi, 2 * np.pi) - np.pi
+
+
+def test_a_single_turn_motor_angle_is_unwrapped_with_its_speed_and_put_back_on_the_output_encoders_turn(tmp_path):
+    """A foreign logger that writes the motor angle within one turn (modulo 2 pi; the contract says unwrapped):
+    read as it is, the gear-ratio check blamed the metadata (theta_m / theta_f = 6.6) and the speed check the units
+    (omega_m 0.005 x the derivative). Each step of a whole turn that omega_m does not show is removed, the angle is
+    moved to the output encoder's turn with N, and the mission reads as the unwrapped log did, with a note."""
+    m = make_mission(n=4000, seed=5)
+    m.theta_m = m.theta_m + 2 * np.pi * 3 * 100  # both encoders three output turns from zero, co-referenced
+    m.theta_f = m.theta_f + 2 * np.pi * 3
+    ref = read_mission(_write(tmp_path / "unwrapped.mcap", m, _stamps(m)))
+    got = read_mission(_write(tmp_path / "wrapped.mcap", m, _stamps(m), theta_m=_wrap(m.theta_m)))
+    np.testing.assert_allclose(got.theta_m, ref.theta_m, rtol=0, atol=1e-9)
+    assert any("theta_m is logged within one turn" in s for s in got.report.notes), got.report.notes
+    assert not got.report.suspect, got.report.suspect
+    assert abs(got.report.gear_ratio_encoders - 100) < 1
+    assert not [v for v in validate_bag(tmp_path / "wrapped.mcap") if v.severity == "error"]
+
+
+def test_a_single_turn_output_angle_of_a_multi_turn_joint_is_unwrapped_too(tmp_path):
+    """A robot joint turning several output revolutions, its output encoder logged within one turn."""
+    m = make_mission(n=4000, seed=6)
+    m.theta_f = 3.0 * m.t + 0.2 * np.sin(2 * np.pi * m.t)  # ~2 output turns in 4 s
+    m.omega_f = np.gradient(m.theta_f, m.t)
+    m.theta_m, m.omega_m = 100 * m.theta_f, 100 * m.omega_f
+    ref = read_mission(_write(tmp_path / "u.mcap", m, _stamps(m)))
+    got = read_mission(_write(tmp_path / "w.mcap", m, _stamps(m), theta_f=_wrap(m.theta_f)))
+    np.testing.assert_allclose(got.theta_f, ref.theta_f, rtol=0, atol=1e-9)
+    assert any("theta_f is logged within one turn" in s for s in got.report.notes)
+
+
+def test_a_jump_the_speed_does_not_explain_as_whole_turns_is_reported_and_left_as_read(tmp_path):
+    """A wrapped log with one step that is not a whole turn (a re-homed encoder, a lost count burst) is not a plain
+    single-turn log: nothing is changed, the mission is marked suspect with the reason."""
+    m = make_mission(n=4000, seed=7)
+    w = _wrap(m.theta_m)
+    w[2500:] = _wrap(w[2500:] + 2.0)  # the encoder re-zeroed by 2 rad mid-mission
+    got = read_mission(_write(tmp_path / "j.mcap", m, _stamps(m), theta_m=w))
+    np.testing.assert_array_equal(got.theta_m, w)
+    assert any("not a plain single-turn log" in s for s in got.report.suspect), got.report.suspect

@@ -369,6 +369,16 @@ def v_theta_large(s: Streams, seed: int = 0) -> Streams:
     return replace(s, js=js, theta_ref=s.theta_ref + 1.0e4 / N)
 
 
+def v_theta_m_wrapped(s: Streams, seed: int = 0) -> Streams:
+    """A single-turn motor encoder: theta_m logged modulo 2 pi in [-pi, pi) (contract: unwrapped), the shaft 40
+    turns from the zero it shares with the output encoder (theta_f co-referenced: + 40 2 pi / N)."""
+    N = float(s.meta["gear_ratio"])
+    js = s.js.copy()
+    js[:, 0] = np.mod(js[:, 0] + 80 * math.pi + math.pi, 2 * math.pi) - math.pi
+    js[:, 1] += 80 * math.pi / N
+    return replace(s, js=js, theta_ref=s.theta_ref + 80 * math.pi / N)
+
+
 def v_extra_topics(s: Streams, seed: int = 0) -> Streams:
     return replace(s, extra_topics=True)
 
@@ -474,6 +484,8 @@ VARIANTS: dict[str, Variant] = {v.name: v for v in [
             match="in rpm?"),
     Variant("torque_sign", "Q_red sign reversed (sensor mounted the other way)", vary=v_torque_sign,
             expect="flagged", match="sign reversed?"),
+    Variant("theta_wrapped", "theta_m logged within one turn (single-turn encoder, modulo 2 pi)",
+            vary=v_theta_m_wrapped),
     Variant("extra_topics", "/tf and /rosout in the bag", vary=v_extra_topics),
     Variant("no_command", "no /hd/command topic", vary=v_no_command),
     Variant("sim_time", "stamps from a clock starting at 0 s", vary=v_sim_time),

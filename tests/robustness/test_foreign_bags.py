@@ -57,6 +57,19 @@ def test_other_writers_layouts_and_extra_topics_read_identically(foreign_bags, n
     assert set(b.temperatures) == set(a.temperatures)
 
 
+def test_a_single_turn_motor_angle_reads_as_the_unwrapped_log(foreign_bags):
+    """theta_m logged modulo 2 pi by another tool reads as the plain bag's angle 40 turns on (unwrapped with
+    omega_m, put on the output encoder's turn with N), with a note and nothing suspect; read as it was, the
+    gear-ratio and speed checks blamed the metadata and the units."""
+    a = read_mission(foreign_bags["plain"])
+    b = read_mission(foreign_bags["theta_wrapped"])
+    np.testing.assert_allclose(b.theta_m, a.theta_m + 80 * np.pi, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(b.theta_f, a.theta_f + 80 * np.pi / 101.0, rtol=0, atol=1e-12)
+    assert any("theta_m is logged within one turn" in x for x in b.report.notes), b.report.notes
+    assert not b.report.suspect, b.report.suspect
+    assert abs(b.report.twist_offset - a.report.twist_offset) < 1e-9
+
+
 def test_extra_topics_are_counted_but_ignored(foreign_bags):
     m = read_mission(foreign_bags["extra_topics"])
     assert m.report.n_messages["/tf"] == 100 and m.report.n_messages["/rosout"] == 8
