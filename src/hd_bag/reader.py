@@ -512,6 +512,10 @@ def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: fl
             unit = min(hints, key=lambda u: abs(math.log(abs(k) / hints[u])) if k else math.inf)
             guess = (f" (close to {hints[unit]:.4g}: {om_name} in {unit}?)"
                      if k > 0 and abs(math.log(k / hints[unit])) < 0.15 else
+                     f" (close to {math.pi / 180:.4g}: {th_name} in degrees?)"
+                     if k > 0 and abs(math.log(k / (math.pi / 180))) < 0.15 else
+                     f" (close to {2 * math.pi:.4g}: {th_name} in revolutions?)"
+                     if k > 0 and abs(math.log(k / (2 * math.pi))) < 0.15 else
                      " (opposite sign: reversed convention?)" if k < 0 else "")
             msg = (f"{om_name} is {k:.4g} x the time derivative of {th_name} over moving samples "
                    f"(contract: rad/s, the derivative of the angle in rad){guess}")
@@ -559,6 +563,25 @@ def gear_ratio_from_encoders(t: np.ndarray, theta_m: np.ndarray, theta_f: np.nda
     return float(np.sum(dm[mov] * df[mov]) / np.sum(df[mov] ** 2)), k
 
 
+def _ratio_hint(r: float) -> str:
+    """What a ratio (encoders' theta_m / theta_f over the metadata's N) of a foreign log usually means, or "".
+
+    The usual ways another tool's angles leave the contract, each a fixed factor within 3 %: the motor angle in
+    electrical radians (x the pole pairs, 2..32), in degrees or revolutions, the output angle in degrees or
+    revolutions, or the sign of one encoder reversed."""
+    if not math.isfinite(r) or r == 0:
+        return ""
+    if r < 0:
+        return " (negative: one encoder's sign reversed?)"
+    known = [(180 / math.pi, "theta_m in degrees"), (1 / (2 * math.pi), "theta_m in revolutions"),
+             (math.pi / 180, "theta_f in degrees"), (2 * math.pi, "theta_f in revolutions")]
+    known += [(float(p), f"theta_m in electrical radians of a motor with {p} pole pairs") for p in range(2, 33)]
+    f, what = min(known, key=lambda fw: abs(math.log(r / fw[0])))
+    if abs(math.log(r / f)) < 0.03:
+        return f" ({r:.4g} x N: {what}?)"
+    return ""
+
+
 def _gear_ratio_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: float) -> bool:
     """Metadata carries no checksum: compare its gear_ratio with the ratio the encoders show. Returns
     False (and reports an error + suspect) on a mismatch beyond :data:`GEAR_RATIO_TOLERANCE`."""
@@ -571,8 +594,8 @@ def _gear_ratio_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, 
         return True
     msg = (f"metadata gear_ratio = {N:g} but the encoders show theta_m / theta_f = {n_hat:.4g} (slope over {k} "
            f"moving 10 ms increments; tolerance {GEAR_RATIO_TOLERANCE:.0%}): the metadata is wrong (a flipped "
-           "bit, another actuator's record) or theta_m is not the motor angle; twist, wind-up and stiffness "
-           "checks skipped")
+           "bit, another actuator's record) or theta_m is not the motor angle" + _ratio_hint(n_hat / N) +
+           "; twist, wind-up and stiffness checks skipped")
     raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg))
     rep.notes.append(msg)
     rep.suspect.append(msg)

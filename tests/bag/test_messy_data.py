@@ -241,3 +241,29 @@ def test_a_jump_the_speed_does_not_explain_as_whole_turns_is_reported_and_left_a
     got = read_mission(_write(tmp_path / "j.mcap", m, _stamps(m), theta_m=w))
     np.testing.assert_array_equal(got.theta_m, w)
     assert any("not a plain single-turn log" in s for s in got.report.suspect), got.report.suspect
+
+
+@pytest.mark.parametrize("scale, speed_scale, hint", [
+    (4.0, 4.0, "electrical radians of a motor with 4 pole pairs"),  # a drive's electrical angle and speed
+    (180 / np.pi, 1.0, "theta_m in degrees"),  # angle in degrees, speed in rad/s
+    (1.0, 1.0 / 100, None),  # sanity: only the speed off, no angle hint
+])
+def test_a_motor_angle_in_other_units_is_named_in_the_gear_ratio_error(tmp_path, scale, speed_scale, hint):
+    """Another tool's motor angle in electrical radians (pole pairs x mechanical) or in degrees shows as an encoder
+    ratio of a fixed multiple of N; the error says which, instead of only blaming the metadata."""
+    m = make_mission(n=4000, seed=8)
+    p = _write(tmp_path / "u.mcap", m, _stamps(m), theta_m=m.theta_m * scale, omega_m=m.omega_m * speed_scale)
+    rep = read_mission(p).report
+    ratio = [x for x in rep.suspect if "gear_ratio" in x]
+    if hint is None:
+        assert not ratio and not any("electrical" in x or "degrees" in x for x in rep.suspect), rep.suspect
+    else:
+        assert ratio and hint in ratio[0], rep.suspect
+
+
+def test_an_output_angle_in_degrees_is_named_by_both_cross_checks(tmp_path):
+    m = make_mission(n=4000, seed=9)
+    p = _write(tmp_path / "deg.mcap", m, _stamps(m), theta_f=np.degrees(m.theta_f))
+    sus = read_mission(p).report.suspect
+    assert any("gear_ratio" in x and "theta_f in degrees" in x for x in sus), sus
+    assert any(x.startswith("omega_f is") and "theta_f in degrees?" in x for x in sus), sus
