@@ -221,6 +221,7 @@ class OnboardCore:
         stamps_ns, V = g.order(stamps_ns, V)  # 1. stamp order
         if len(stamps_ns) == 0:
             return PushResult(np.empty((0, len(RESIDUAL_COLUMNS))), self.level)
+        V = g.unwrap(stamps_ns, V)  # an angle arriving within one turn, unwrapped with its speed
         if g.start(stamps_ns):  # the rate became known
             self.detection.configure_rates(g.fs)
             self.residuals.rate_known(g.fs, (int(stamps_ns[0]) - g.t0_ns) * 1e-9, g.note)
@@ -329,6 +330,8 @@ class OnboardCore:
             self.windows.extend(r.windows)
             return self.level
         g.health.n_samples += 1
+        tm, tf = g.unwrap_one(stamp_ns, tm, wm, tf, wf)  # an angle arriving within one turn
+        v = (tm, tf, wm, wf, tau, Q)
         t = (stamp_ns - g.t0_ns) * 1e-9
         h = g.hold
         h[0], h[1], h[2], h[3], h[4], h[5] = tm, tf, wm, wf, tau, Q

@@ -20,9 +20,12 @@ mission shorter than the warm-up; the residuals record the twin fallbacks here t
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from hd_bag.reader import WRAP_TOL
 
 from hd_onboard.detectors.levels import OK, WARN, run_lengths
 
@@ -66,6 +69,9 @@ class InputGuard:
         self.twist_checked = False
         self.nan_run = 0  # length of the NaN run at the end of the last block
         self.hold = np.full(6, np.nan)  # last sample, NaN held (twin input)
+        #: per angle column (0 theta_m, 1 theta_f): last finite raw angle, its speed and stamp, the turns removed so
+        #: far [rad] and the whole-turn steps seen (:meth:`unwrap`)
+        self._wrap = {c: [np.nan, np.nan, 0, 0.0, 0] for c in (0, 1)}
 
     # ---- input problems ------------------------------------------------------------------------------
     def note(self, key: str, level: int, message: str) -> None:
@@ -99,6 +105,63 @@ class InputGuard:
             self.health.n_dropped_order += int((~keep).sum())
             stamps_ns, V = stamps_ns[keep], V[keep]
         return stamps_ns, V
+
+    def unwrap(self, stamps_ns: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """An angle arriving within one turn (a single-turn encoder's driver, modulo 2 pi; contract: unwrapped):
+        each step between neighbouring samples that its own speed does not show and that is a whole number k != 0
+        of turns (to ``hd_bag.reader.WRAP_TOL`` after the trapezoid of the two speeds) loses 2 pi k, across blocks,
+        noted once per angle. The bag reader's rule (``hd_bag.reader._unwrap_check``) sample by sample: a real-time
+        monitor cannot look at the whole mission first. Such a step needs a motion of about a turn in one sample
+        that the speed does not show, so an unwrapped stream is never changed; a corrupt sample that happens to sit
+        a whole turn off is undone by the step back. Without it every wrap is a twist step of 2 pi / N: a fault
+        flag. ``V`` is returned (a copy when changed)."""
+        out = V
+        for c_th, c_om, name in ((0, 2, "theta_m"), (1, 3, "theta_f")):
+            st = self._wrap[c_th]
+            th, om = V[:, c_th], V[:, c_om]
+            fin = np.flatnonzero(np.isfinite(th))
+            if len(fin) == 0:
+                continue
+            x = np.concatenate([[st[0]], th[fin]])
+            w = np.concatenate([[st[1]], om[fin]])
+            ts = np.concatenate([[st[2]], stamps_ns[fin]]).astype(np.float64) * 1e-9
+            step = np.diff(x)
+            moved = 0.5 * (w[:-1] + w[1:]) * np.diff(ts)
+            k = np.rint((step - moved) / (2.0 * np.pi))
+            wrap = np.isfinite(step) & np.isfinite(moved) & (k != 0) & (np.abs(step - moved - 2.0 * np.pi * k) < WRAP_TOL)
+            off = st[3] - 2.0 * np.pi * np.cumsum(np.where(wrap, k, 0.0))
+            st[0], st[1], st[2] = float(th[fin[-1]]), float(om[fin[-1]]), int(stamps_ns[fin[-1]])
+            if wrap.any() or st[3] != 0.0:
+                if out is V:
+                    out = V.copy()
+                out[fin, c_th] = th[fin] + off
+                st[3] = float(off[-1])
+            if wrap.any():
+                st[4] += int(wrap.sum())
+                self._wrap_note(name)
+        return out
+
+    def unwrap_one(self, stamp_ns: int, tm: float, wm: float, tf: float, wf: float) -> tuple[float, float]:
+        """:meth:`unwrap` of one finite sample (the real-time short path), in scalars: (theta_m, theta_f)."""
+        return self._unwrap1(0, "theta_m", stamp_ns, tm, wm), self._unwrap1(1, "theta_f", stamp_ns, tf, wf)
+
+    def _unwrap1(self, c: int, name: str, stamp_ns: int, th: float, om: float) -> float:
+        st = self._wrap[c]
+        step = th - st[0]
+        moved = 0.5 * (om + st[1]) * (stamp_ns - st[2]) * 1e-9
+        d = step - moved
+        if math.isfinite(d) and abs(d) > math.pi:
+            k = round(d / (2.0 * math.pi))
+            if k and abs(d - 2.0 * math.pi * k) < WRAP_TOL:
+                st[3] -= 2.0 * math.pi * k
+                st[4] += 1
+                self._wrap_note(name)
+        st[0], st[1], st[2] = th, om, stamp_ns
+        return th + st[3]
+
+    def _wrap_note(self, name: str) -> None:
+        self.note(f"wrapped_{name}", OK, f"{name} arrives within one turn (modulo 2 pi; contract: unwrapped): unwrapped "
+                  "in the stream with its own speed (each step of a whole turn it does not show)")
 
     def start(self, stamps_ns: np.ndarray) -> bool:
         """Mission start and nominal rate from the first stamps (fixed once known); True when the rate
