@@ -463,6 +463,26 @@ def _limit_check(raw: _Raw, topic: str, name: str, v: np.ndarray, index: np.ndar
     return v
 
 
+#: degC: above this a winding or gearbox temperature is beyond any insulation class (H: 180 degC) and grease
+KELVIN_SUSPECT_DEGC = 200.0
+
+
+def _kelvin_check(raw: _Raw, rep: ReadReport, frame: str, v: np.ndarray) -> None:
+    """A temperature whose median lies above :data:`KELVIN_SUSPECT_DEGC` and reads as -70..130 degC less 273.15 is
+    most likely logged in kelvin (``sensor_msgs/Temperature`` is degrees Celsius): reported, suspect, not changed
+    (a temperature law in (T - T_ref) does not care; a twin or threshold trained in degC does)."""
+    f = v[np.isfinite(v)]
+    if not len(f):
+        return
+    med = float(np.median(f))
+    if med > KELVIN_SUSPECT_DEGC and -70.0 <= med - 273.15 <= 130.0:
+        msg = (f"temperature[{frame}] has median {med:.5g} degC, beyond any winding insulation class or grease; as "
+               f"kelvin it is {med - 273.15:.4g} degC: logged in kelvin? (contract: degrees Celsius)")
+        raw.problems.append(_Problem(TOPIC_TEMPERATURE, None, msg))
+        rep.notes.append(msg)
+        rep.suspect.append(msg)
+
+
 #: omega / d(theta)/dt outside this band is a unit or sign error, not a speed estimator's lag
 #: (measured rigs: 0.4-1.0; rpm for rad/s gives 9.55, deg/s 57.3, a reversed sign -1).
 SPEED_SCALE_BAND = (0.25, 4.0)
@@ -887,6 +907,7 @@ def _assemble(raw: _Raw, include_sim: bool) -> Mission | None:
                 rep.notes.append(f"dropped {len(dup_idx)} {fr} temperature messages with a duplicate stamp")
             temps[fr] = ((ts[m][order][keep] - t0) * 1e-9, tv[m][order][keep])
             rep.n_nan[f"temperature[{fr}]"] = int(np.isnan(temps[fr][1]).sum())
+            _kelvin_check(raw, rep, fr, temps[fr][1])
     else:
         raw.problems.append(_Problem(TOPIC_TEMPERATURE, None, "no /hd/temperature messages (contract topic; "
                                      "temperature_on_t() gives NaN)", "warning"))

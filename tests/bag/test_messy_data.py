@@ -267,3 +267,22 @@ def test_an_output_angle_in_degrees_is_named_by_both_cross_checks(tmp_path):
     sus = read_mission(p).report.suspect
     assert any("gear_ratio" in x and "theta_f in degrees" in x for x in sus), sus
     assert any(x.startswith("omega_f is") and "theta_f in degrees?" in x for x in sus), sus
+
+
+def test_a_temperature_logged_in_kelvin_is_named(tmp_path):
+    """sensor_msgs/Temperature is degrees Celsius; a gearbox at 20 degC logged as 293.15 is inside the reader's
+    absurd-value limits but beyond any insulation class: reported as kelvin, suspect, left as read."""
+    m = make_mission(n=2000, seed=10)
+    p = tmp_path / "k.mcap"
+    with MissionWriter(p, m.meta) as w:
+        w.add_joint_states(_stamps(m), m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red)
+        w.add_temperature("gearbox", T0_NS + np.round(m.t[::100] * 1e9).astype(np.int64), 293.15 + 0 * m.t[::100])
+    got = read_mission(p)
+    assert any("logged in kelvin?" in x and "20 degC" in x for x in got.report.suspect), got.report.suspect
+    np.testing.assert_allclose(got.temperatures["gearbox"][1], 293.15)
+    # a hot but plausible winding (150 degC) says nothing
+    p2 = tmp_path / "hot.mcap"
+    with MissionWriter(p2, m.meta) as w:
+        w.add_joint_states(_stamps(m), m.theta_m, m.theta_f, m.omega_m, m.omega_f, m.tau_m, m.Q_red)
+        w.add_temperature("motor_winding", T0_NS + np.round(m.t[::100] * 1e9).astype(np.int64), 150 + 0 * m.t[::100])
+    assert not read_mission(p2).report.suspect
