@@ -125,10 +125,14 @@ class InputGuard:
             x = np.concatenate([[st[0]], th[fin]])
             w = np.concatenate([[st[1]], om[fin]])
             ts = np.concatenate([[st[2]], stamps_ns[fin]]).astype(np.float64) * 1e-9
-            step = np.diff(x)
-            moved = 0.5 * (w[:-1] + w[1:]) * np.diff(ts)
+            step, dts = np.diff(x), np.diff(ts)
+            moved = 0.5 * (w[:-1] + w[1:]) * dts
             k = np.rint((step - moved) / (2.0 * np.pi))
             wrap = np.isfinite(step) & np.isfinite(moved) & (k != 0) & (np.abs(step - moved - 2.0 * np.pi * k) < WRAP_TOL)
+            if self.fs and not st[4]:
+                # across a dropout the speeds' trapezoid is no measure of the motion: a stream not yet seen to wrap
+                # is not unwrapped there (one that has is: it is a single-turn stream)
+                wrap &= dts * self.fs <= 1.5
             off = st[3] - 2.0 * np.pi * np.cumsum(np.where(wrap, k, 0.0))
             st[0], st[1], st[2] = float(th[fin[-1]]), float(om[fin[-1]]), int(stamps_ns[fin[-1]])
             if wrap.any() or st[3] != 0.0:

@@ -159,3 +159,29 @@ def test_a_motor_angle_arriving_within_one_turn_is_unwrapped_in_the_stream(bags)
         rows.append(core.take_rows())
     assert len(rows[0]) > 1000
     np.testing.assert_allclose(rows[1], rows[0], rtol=0, atol=1e-9, equal_nan=True)
+
+
+def test_a_turn_made_during_a_dropout_is_not_taken_for_a_wrap():
+    """The motor turned once while the joint states dropped out, at standstill at both ends: the speeds' trapezoid
+    says 0 and the step is a whole turn, but across a dropout that is no evidence of a single-turn stream; a stream
+    never seen to wrap keeps its angle. Within one sample period the same step is a wrap."""
+    from types import SimpleNamespace
+
+    from hd_onboard.guard import InputGuard
+
+    def block(t0_s, n, th):
+        st = np.round((t0_s + np.arange(n) / 1000.0) * 1e9).astype(np.int64)
+        V = np.zeros((n, 6))
+        V[:, 0] = th
+        return st, V
+
+    g = InputGuard(SimpleNamespace(nominal_fs=1000.0))
+    g.unwrap(*block(0.0, 100, 0.0))
+    st, V = block(0.6, 100, 2 * np.pi + 0.1)  # 0.5 s dropout
+    np.testing.assert_array_equal(g.unwrap(st, V)[:, 0], V[:, 0])
+    assert "wrapped_theta_m" not in g.notes
+    g2 = InputGuard(SimpleNamespace(nominal_fs=1000.0))
+    g2.unwrap(*block(0.0, 100, 0.0))
+    st, V = block(0.1, 100, 2 * np.pi + 0.1)  # the next sample
+    np.testing.assert_allclose(g2.unwrap(st, V)[:, 0], 0.1)
+    assert g2.notes["wrapped_theta_m"][0] == OK
