@@ -661,14 +661,19 @@ def _unwrap_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: f
         # (steps across a dropout, where the speed's trapezoid is no measure of the motion, only when beyond pi)
         om, tt = M[fin, c_om], t[fin]
         dts = np.diff(tt)
+        across_gap = dts > 1.5 * float(np.median(dts))
         moved_all = 0.5 * (om[:-1] + om[1:]) * dts
-        unexplained = np.abs(step - moved_all) > WRAP_TOL
-        unexplained &= dts <= 1.5 * float(np.median(dts))
+        unexplained = (np.abs(step - moved_all) > WRAP_TOL) & ~across_gap
         jump = np.union1d(jump, np.flatnonzero(unexplained))
         moved = moved_all[jump]
         k = np.rint((step[jump] - moved) / two_pi)
         resid = step[jump] - moved - two_pi * k
         wraps = np.isfinite(resid) & (k != 0) & (np.abs(resid) < WRAP_TOL)
+        # the evidence: whole turns between neighbouring samples; a step across a dropout may be a whole turn by
+        # chance (the motion during it is unknown), so it is unwrapped only beside such evidence and is none itself
+        evidence = wraps & ~across_gap[jump]
+        if not evidence.any():
+            continue
         bounded = float(np.ptp(x)) <= two_pi * (1.0 + 1e-6) + WRAP_TOL
         if bounded and wraps.all():
             turns = np.zeros(len(step))
@@ -681,7 +686,7 @@ def _unwrap_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: f
             unwrapped.append(c_th)
             raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg, "warning"))
             rep.notes.append(msg)
-        elif wraps.any():
+        else:
             msg = (f"{th_name} steps by more than {om_name} explains {len(jump)} times, {int(wraps.sum())} of them by "
                    f"whole turns (a log within one turn?), but " +
                    ("not all" if bounded else f"the angle spans {float(np.ptp(x)):.4g} rad, more than one turn") +
