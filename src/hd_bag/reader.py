@@ -528,10 +528,16 @@ def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: fl
         if mov.sum() < 50 or not np.any(d[mov]):
             continue
         k = float(np.sum(d[mov] * om[mov]) / np.sum(d[mov] ** 2))
-        if not SPEED_SCALE_BAND[0] <= k <= SPEED_SCALE_BAND[1]:
+        # a drive's electrical speed (pole pairs x the mechanical one) beside the mechanical angle: an integer ratio
+        # 2..32 to within 2 %, inside the band for 2-4 pole pairs (a speed estimate's lag gives 0.4-1.0, never that)
+        pp = round(k) if math.isfinite(k) else 0
+        electrical = c_om == 2 and 2 <= pp <= 32 and abs(k / pp - 1.0) < 0.02
+        if not SPEED_SCALE_BAND[0] <= k <= SPEED_SCALE_BAND[1] or electrical:
             unit = min(hints, key=lambda u: abs(math.log(abs(k) / hints[u])) if k else math.inf)
             guess = (f" (close to {hints[unit]:.4g}: {om_name} in {unit}?)"
                      if k > 0 and abs(math.log(k / hints[unit])) < 0.15 else
+                     f" (close to {pp}: {om_name} the electrical speed of a motor with {pp} pole pairs?)"
+                     if electrical else
                      f" (close to {math.pi / 180:.4g}: {th_name} in degrees?)"
                      if k > 0 and abs(math.log(k / (math.pi / 180))) < 0.15 else
                      f" (close to {2 * math.pi:.4g}: {th_name} in revolutions?)"

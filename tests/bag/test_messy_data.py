@@ -299,3 +299,17 @@ def test_a_turn_made_during_a_dropout_of_an_unwrapped_log_says_nothing(tmp_path)
     got = read_mission(_write(tmp_path / "gap.mcap", m, _stamps(m)[rows], rows=rows))
     assert not any("turn" in x for x in got.report.notes + got.report.suspect), got.report.notes
     np.testing.assert_array_equal(got.theta_m, m.theta_m[rows])
+
+
+@pytest.mark.parametrize("factor, flagged", [(3.0, True), (7.0, True), (1.0, False), (0.7, False)])
+def test_a_drives_electrical_speed_beside_the_mechanical_angle_is_named(tmp_path, factor, flagged):
+    """Drives often log the electrical speed (pole pairs x mechanical): 3 x the angle's derivative lies inside the
+    speed band that a filtered estimate's lag needs (0.25-4) and passed silently; an integer ratio to 2 % is named.
+    A speed estimate that reads 0.7 of the derivative (lag) is not."""
+    m = make_mission(n=4000, seed=12)
+    p = _write(tmp_path / "e.mcap", m, _stamps(m), omega_m=m.omega_m * factor)
+    sus = [x for x in read_mission(p).report.suspect if x.startswith("omega_m is")]
+    if flagged:
+        assert sus and f"motor with {int(factor)} pole pairs?" in sus[0], sus
+    else:
+        assert not sus, sus
