@@ -513,7 +513,6 @@ def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: fl
     L = max(1, int(round(0.01 / max(float(np.median(np.diff(t))), 1e-9))))
     if n <= 4 * L:
         return
-    hints = {"rpm": 60 / (2 * math.pi), "deg/s": 180 / math.pi, "rev/s": 1 / (2 * math.pi)}
     for c_th, c_om, th_name, om_name in ((0, 2, "theta_m", "omega_m"), (1, 3, "theta_f", "omega_f")):
         d = (M[L:, c_th] - M[:-L, c_th]) / (t[L:] - t[:-L])
         om = 0.5 * (M[L:, c_om] + M[:-L, c_om])
@@ -533,18 +532,9 @@ def _consistency(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: fl
         pp = round(k) if math.isfinite(k) else 0
         electrical = c_om == 2 and 2 <= pp <= 32 and abs(k / pp - 1.0) < 0.02
         if not SPEED_SCALE_BAND[0] <= k <= SPEED_SCALE_BAND[1] or electrical:
-            unit = min(hints, key=lambda u: abs(math.log(abs(k) / hints[u])) if k else math.inf)
-            guess = (f" (close to {hints[unit]:.4g}: {om_name} in {unit}?)"
-                     if k > 0 and abs(math.log(k / hints[unit])) < 0.15 else
-                     f" (close to {pp}: {om_name} the electrical speed of a motor with {pp} pole pairs?)"
-                     if electrical else
-                     f" (close to {math.pi / 180:.4g}: {th_name} in degrees?)"
-                     if k > 0 and abs(math.log(k / (math.pi / 180))) < 0.15 else
-                     f" (close to {2 * math.pi:.4g}: {th_name} in revolutions?)"
-                     if k > 0 and abs(math.log(k / (2 * math.pi))) < 0.15 else
-                     " (opposite sign: reversed convention?)" if k < 0 else "")
             msg = (f"{om_name} is {k:.4g} x the time derivative of {th_name} over moving samples "
-                   f"(contract: rad/s, the derivative of the angle in rad){guess}")
+                   f"(contract: rad/s, the derivative of the angle in rad)"
+                   f"{_speed_hint(k, om_name, th_name, pp if electrical else 0)}")
             raw.problems.append(_Problem(TOPIC_JOINT_STATES, None, msg))
             rep.notes.append(msg)
             rep.suspect.append(msg)
@@ -589,6 +579,31 @@ def gear_ratio_from_encoders(t: np.ndarray, theta_m: np.ndarray, theta_f: np.nda
     return float(np.sum(dm[mov] * df[mov]) / np.sum(df[mov] ** 2)), k
 
 
+def _nearest_factor(r: float, known: list[tuple[float, str]], tol: float) -> tuple[float, str] | None:
+    """The (factor, meaning) of ``known`` nearest to the ratio ``r > 0`` on a log scale, when within ``tol``."""
+    f, what = min(known, key=lambda fw: abs(math.log(r / fw[0])))
+    return (f, what) if abs(math.log(r / f)) < tol else None
+
+
+def _speed_hint(k: float, om_name: str, th_name: str, pole_pairs: int) -> str:
+    """What a speed-to-derivative ratio ``k`` of a foreign log usually means, or "", in this order: the speed in rpm,
+    deg/s or rev/s (within 15 %), a drive's electrical speed (``pole_pairs`` > 0, decided by the caller), the angle
+    in degrees or revolutions (within 15 %), a reversed sign."""
+    if k < 0:
+        return " (opposite sign: reversed convention?)"
+    if k == 0:
+        return ""
+    speed = _nearest_factor(k, [(60 / (2 * math.pi), f"{om_name} in rpm"), (180 / math.pi, f"{om_name} in deg/s"),
+                                (1 / (2 * math.pi), f"{om_name} in rev/s")], 0.15)
+    if speed is not None:
+        return f" (close to {speed[0]:.4g}: {speed[1]}?)"
+    if pole_pairs:
+        return f" (close to {pole_pairs}: {om_name} the electrical speed of a motor with {pole_pairs} pole pairs?)"
+    angle = _nearest_factor(k, [(math.pi / 180, f"{th_name} in degrees"), (2 * math.pi, f"{th_name} in revolutions")],
+                            0.15)
+    return f" (close to {angle[0]:.4g}: {angle[1]}?)" if angle is not None else ""
+
+
 def _ratio_hint(r: float) -> str:
     """What a ratio (encoders' theta_m / theta_f over the metadata's N) of a foreign log usually means, or "".
 
@@ -602,10 +617,8 @@ def _ratio_hint(r: float) -> str:
     known = [(180 / math.pi, "theta_m in degrees"), (1 / (2 * math.pi), "theta_m in revolutions"),
              (math.pi / 180, "theta_f in degrees"), (2 * math.pi, "theta_f in revolutions")]
     known += [(float(p), f"theta_m in electrical radians of a motor with {p} pole pairs") for p in range(2, 33)]
-    f, what = min(known, key=lambda fw: abs(math.log(r / fw[0])))
-    if abs(math.log(r / f)) < 0.03:
-        return f" ({r:.4g} x N: {what}?)"
-    return ""
+    hit = _nearest_factor(r, known, 0.03)
+    return f" ({r:.4g} x N: {hit[1]}?)" if hit is not None else ""
 
 
 def _gear_ratio_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: float) -> bool:
@@ -632,6 +645,16 @@ def _gear_ratio_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, 
 WRAP_TOL = 0.5
 
 
+def whole_turns(step: np.ndarray, moved: np.ndarray) -> np.ndarray:
+    """The wrap rule: per step of an angle [rad], the whole number k != 0 of turns it is after the motion its speed
+    explains (``moved``, the trapezoid of the two speeds), to within :data:`WRAP_TOL`; 0 where it is no such step
+    (or not finite). Used by :func:`_unwrap_check` and the onboard stream (``hd_onboard.guard``)."""
+    d = step - moved
+    k = np.rint(d / (2.0 * math.pi))
+    ok = np.isfinite(d) & (k != 0) & (np.abs(d - 2.0 * math.pi * k) < WRAP_TOL)
+    return np.where(ok, k, 0.0)
+
+
 def _unwrap_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: float | None) -> None:
     """An angle logged within one turn (a single-turn encoder, modulo 2 pi; contract: unwrapped) is unwrapped, with a
     note; one whose jumps the speed cannot explain as whole turns is reported, not changed.
@@ -647,10 +670,9 @@ def _unwrap_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: f
     The turn a wrapped log starts in is lost; with the gear ratio ``N`` the unwrapped angle is moved by whole turns to
     the other encoder's (theta_m = N theta_f up to the twist, which is far below a turn on either side), so the twist
     stays meaningful; without ``N`` it is left as the log's first turn."""
-    n = len(t)
-    unwrapped = []
-    if n < 3:
+    if len(t) < 3:
         return
+    unwrapped = []
     two_pi = 2.0 * math.pi
     for c_th, c_om, th_name, om_name in ((0, 2, "theta_m", "omega_m"), (1, 3, "theta_f", "omega_f")):
         th = M[:, c_th]
@@ -671,10 +693,8 @@ def _unwrap_check(raw: _Raw, rep: ReadReport, t: np.ndarray, M: np.ndarray, N: f
         moved_all = 0.5 * (om[:-1] + om[1:]) * dts
         unexplained = (np.abs(step - moved_all) > WRAP_TOL) & ~across_gap
         jump = np.union1d(jump, np.flatnonzero(unexplained))
-        moved = moved_all[jump]
-        k = np.rint((step[jump] - moved) / two_pi)
-        resid = step[jump] - moved - two_pi * k
-        wraps = np.isfinite(resid) & (k != 0) & (np.abs(resid) < WRAP_TOL)
+        k = whole_turns(step[jump], moved_all[jump])
+        wraps = k != 0
         # the evidence: whole turns between neighbouring samples; a step across a dropout may be a whole turn by
         # chance (the motion during it is unknown), so it is unwrapped only beside such evidence and is none itself
         evidence = wraps & ~across_gap[jump]

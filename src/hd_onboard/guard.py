@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hd_bag.reader import WRAP_TOL
+from hd_bag.reader import WRAP_TOL, whole_turns
 
 from hd_onboard.detectors.levels import OK, WARN, run_lengths
 
@@ -125,15 +125,14 @@ class InputGuard:
             x = np.concatenate([[st[0]], th[fin]])
             w = np.concatenate([[st[1]], om[fin]])
             ts = np.concatenate([[st[2]], stamps_ns[fin]]).astype(np.float64) * 1e-9
-            step, dts = np.diff(x), np.diff(ts)
-            moved = 0.5 * (w[:-1] + w[1:]) * dts
-            k = np.rint((step - moved) / (2.0 * np.pi))
-            wrap = np.isfinite(step) & np.isfinite(moved) & (k != 0) & (np.abs(step - moved - 2.0 * np.pi * k) < WRAP_TOL)
+            dts = np.diff(ts)
+            k = whole_turns(np.diff(x), 0.5 * (w[:-1] + w[1:]) * dts)
             if self.fs and not st[4]:
                 # across a dropout the speeds' trapezoid is no measure of the motion: a stream not yet seen to wrap
                 # is not unwrapped there (one that has is: it is a single-turn stream)
-                wrap &= dts * self.fs <= 1.5
-            off = st[3] - 2.0 * np.pi * np.cumsum(np.where(wrap, k, 0.0))
+                k = np.where(dts * self.fs <= 1.5, k, 0.0)
+            wrap = k != 0
+            off = st[3] - 2.0 * np.pi * np.cumsum(k)
             st[0], st[1], st[2] = float(th[fin[-1]]), float(om[fin[-1]]), int(stamps_ns[fin[-1]])
             if wrap.any() or st[3] != 0.0:
                 if out is V:
@@ -150,6 +149,7 @@ class InputGuard:
         return self._unwrap1(0, "theta_m", stamp_ns, tm, wm), self._unwrap1(1, "theta_f", stamp_ns, tf, wf)
 
     def _unwrap1(self, c: int, name: str, stamp_ns: int, th: float, om: float) -> float:
+        # hd_bag.reader.whole_turns in scalars: numpy's per-call cost on one sample would dominate the short path
         st = self._wrap[c]
         step = th - st[0]
         moved = 0.5 * (om + st[1]) * (stamp_ns - st[2]) * 1e-9
