@@ -3,9 +3,9 @@
 For every failed unit of a simulated fleet the life model is fitted leave-one-unit-out as ``hdphm bench prognostics``
 fits it (its defaults, point estimate: no parameter draws) on the other units' HI histories, failure missions and
 overhaul readings (the bench's shop: ``--inspect-every K``, the quantity's gauge sd), and the held-out unit's latent
-state is estimated at the missions where it was inspected, three ways: from its HI records *and* readings (the model),
-from its HI records alone, and from its readings alone (the fitted map ``v = alpha + beta L`` inverted at the latest
-reading). Next to them, the truth in the same units: the unit's wear over the training units' median failure wear
+state is estimated at the missions where it was inspected, four ways: from its HI records *and* readings (the model),
+from its HI records alone, from its readings so far alone through the fold's path ``L = r (E / E_ref)^b`` (least
+squares for ``r``, flat prior) and from the latest reading alone (the fitted map ``v = alpha + beta L`` inverted). Next to them, the truth in the same units: the unit's wear over the training units' median failure wear
 (``h / median h_fail``; reads ``fleet_truth.json``, nothing here feeds a fit). It also prints each unit's HI map
 against its true wear (least squares ``HI = a + g h / median h_fail``, offset and gain), the scatter of those maps
 over the fleet, and what the fitted model assumes for it (``s_a`` over ``c``, ``s_g``).
@@ -90,6 +90,7 @@ def main(argv=None) -> int:
         X = np.array([(u.exposure_at(t) / m.E_ref) ** m.b for t in ts])
         z1, w1 = m.posterior(test, ts)
         z2, w2 = m.posterior(hi_only, ts)
+        vr = np.array([val for _, q, val in test.events.inspections if q == a.quantity])
         sa_L = math.exp(m.theta["log_sa"]) / abs(m.theta["c"])
         sg = math.exp(m.theta["log_sg"]) if "log_sg" in m.theta else 0.0
         print(f"{u.unit} (EOL {u.events.failure:g}; fold: b {m.b:.3f}, s_a/c {sa_L:.3f} in L, s_g {sg:.3f}, "
@@ -97,17 +98,25 @@ def main(argv=None) -> int:
         for k, t in enumerate(ts):
             q1 = m.latent_quantiles(z1[k], w1[k], X[k])
             q2 = m.latent_quantiles(z2[k], w2[k], X[k])
+            # the readings so far through the fold's path L = r X (least squares for r, flat prior, no HI)
+            xs, vs = X[:k + 1], vr[:k + 1]
+            r_hat = float(np.sum((vs - qm["alpha"]) * xs) / (qm["beta"] * np.sum(xs ** 2)))
+            sd_r = math.exp(qm["log_tau"]) / (abs(qm["beta"]) * math.sqrt(np.sum(xs ** 2)))
+            q3 = (r_hat * X[k] - 1.645 * sd_r * X[k], r_hat * X[k], r_hat * X[k] + 1.645 * sd_r * X[k])
             v = [val for tt, q, val in test.events.inspections if q == a.quantity and tt == t][-1]
             Lr = (v - qm["alpha"]) / qm["beta"]
             Lt = h[int(t)] / hmed
-            rows.append((q1[1] - Lt, q2[1] - Lt, Lr - Lt, (q1[2] - q1[0]) / 3.29))
+            rows.append((q1[1] - Lt, q2[1] - Lt, Lr - Lt, (q1[2] - q1[0]) / 3.29, q3[1] - Lt, (q2[2] - q2[0]) / 3.29,
+                         (q3[2] - q3[0]) / 3.29))
             print(f"  mission {t:4g}: true {Lt:.3f} | model {q1[1]:.3f} [{q1[0]:.3f}, {q1[2]:.3f}] | HI alone "
-                  f"{q2[1]:.3f} | latest reading alone {Lr:.3f}")
+                  f"{q2[1]:.3f} | readings alone {q3[1]:.3f} | latest reading alone {Lr:.3f}")
     if rows:
         r = np.array(rows)
         print("RMS error against the true wear (L units), over every unit and reading: model "
               f"{np.sqrt(np.mean(r[:, 0] ** 2)):.3f}, HI alone {np.sqrt(np.mean(r[:, 1] ** 2)):.3f}, reading alone "
-              f"{np.sqrt(np.mean(r[:, 2] ** 2)):.3f}; the model's own posterior sd (mean) {np.mean(r[:, 3]):.3f}")
+              f"{np.sqrt(np.mean(r[:, 2] ** 2)):.3f}, readings alone through the path "
+              f"{np.sqrt(np.mean(r[:, 4] ** 2)):.3f}; posterior sd (mean; from the 90 % interval): model "
+              f"{np.mean(r[:, 3]):.3f}, HI alone {np.mean(r[:, 5]):.3f}, readings alone {np.mean(r[:, 6]):.3f}")
     return 0
 
 
