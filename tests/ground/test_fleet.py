@@ -111,3 +111,40 @@ def test_gaussian_classifier_held_out_and_unknown():
     assert np.allclose(m2.predict_proba(Xte[:5]), p[:5])
     with pytest.raises(ValueError, match="retrain"):
         GaussianFaultClassifier.from_json({**m.to_json(), "features": ["x"]})
+
+
+def test_train_classifier_cli_chooses_the_covariance_across_plant_types(fleet_bags, tmp_path, capsys):
+    """`hdphm fleet train-classifier` with a plant column: the covariance chosen by leave one plant out (folds whose
+    other plants cannot be fitted are skipped, not an error); a plant column filled for some actuators only is
+    refused by name."""
+    import json
+
+    from hd_ground.fleet.tasks import FleetOptions, calibrate_task, mission_task
+    from hdphm.cli import main
+
+    opts = FleetOptions(healthy_missions=1, onboard={"warmup_s": 1.0})
+    store = tmp_path / "store"
+    ids = sorted({b.split("/")[-2] for b in fleet_bags if "EMA-" in b.split("/")[-2]})[:3]
+    for aid in ids:
+        bags = [b for b in fleet_bags if f"/{aid}/" in b]
+        cal = calibrate_task(bags[:1], opts)
+        for b in bags:
+            mission_task(b, str(store), cal, opts)
+    plant = {ids[0]: "P1", ids[1]: "P1", ids[2]: "P2"}
+    lab = {(ids[0], 1): "healthy", (ids[0], 2): "healthy", (ids[1], 1): "tooth_wear", (ids[1], 2): "tooth_wear",
+           (ids[2], 1): "healthy", (ids[2], 2): "tooth_wear"}
+    rows = ["actuator_id,mission_index,label,plant"] + [f"{a},{k},{v},{plant[a]}" for (a, k), v in lab.items()]
+    (tmp_path / "labels.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "clf.json"
+    assert main(["fleet", "train-classifier", "--store", str(store), "--labels", str(tmp_path / "labels.csv"),
+                 "--out", str(out), "--healthy-missions", "1"]) == 0
+    assert "leave-one-plant-out over P1, P2" in capsys.readouterr().out
+    ch = json.loads(out.read_text())["info"]["covariance_choice"]
+    assert ch["plants"] == ["P1", "P2"] and set(ch["per_plant"]["pooled"]) == {"P2"}  # P2 alone cannot be fitted
+    for bad, msg in (([r.rsplit(",", 1)[0] + "," if r.startswith(ids[2]) else r for r in rows],
+                      "plant column is empty for some actuators"),  # one actuator without its plant type
+                     (rows[:-1] + [rows[-1].rsplit(",", 1)[0] + ",P1"], "one plant type per actuator")):
+        (tmp_path / "labels.csv").write_text("\n".join(bad) + "\n")
+        assert main(["fleet", "train-classifier", "--store", str(store), "--labels", str(tmp_path / "labels.csv"),
+                     "--out", str(out), "--healthy-missions", "1"]) == 1
+        assert msg in capsys.readouterr().err

@@ -14,10 +14,12 @@ three groups the twin and the onboard monitors give:
 * features and residuals: log ratios of the output-torque and twist residual RMS, of the kinematic-error
   order ``ke_2x`` and of the lost motion.
 
-**Model**: Gaussian class-conditional densities (quadratic discriminant analysis). Each class has its
-mean and covariance, shrunk toward the pooled within-class covariance as a conjugate prior with
-``nu = d + 2`` pseudo-observations, ``S_c = (n_c S_c_hat + nu S_pool) / (n_c + nu)``, so small classes
-stay well-conditioned; equal class priors (a fleet's fault mix is not the training fleet's). Missing
+**Model**: Gaussian class-conditional densities, each class with its mean and one of three covariance
+structures (``covariance``): the pooled within-class covariance (``pooled``, linear discriminant, the default), its
+diagonal (``diagonal``), or per class (``class``, quadratic discriminant) shrunk toward the pooled one as a
+conjugate prior with ``nu = d + 2`` pseudo-observations, ``S_c = (n_c S_c_hat + nu S_pool) / (n_c + nu)``, so small
+classes stay well-conditioned; :func:`fit_across_plants` chooses the structure by leave-one-plant-out
+cross-validation when the training data come from several plant types; equal class priors (a fleet's fault mix is not the training fleet's). Missing
 inputs (a monitor that could not evaluate) are marginalised: the Gaussian of the observed coordinates.
 **Unknown** is a broad background class: a Gaussian centred on the training mean with ``background_scale``^2
 times the total training covariance and prior ``background_prior``; a point unlikely under every fault
@@ -42,6 +44,8 @@ LABELS = CLASSES + ("unknown",)
 FEATURES = ("d_T_C", "d_mesh_loss", "friction_excess", "d_friction_b", "log_compliance", "max_level",
             "log_Q_rms", "log_twist_rms", "log_ke_2x", "log_lost_motion")
 DEFAULT_MODEL = Path(__file__).with_name("default_classifier.json")
+#: class covariance structures: shared full (LDA), per class shrunk to the pooled one (QDA), shared diagonal
+COVARIANCES = ("pooled", "class", "diagonal")
 
 
 def _med(rows: Sequence[dict], key: str) -> float:
@@ -98,8 +102,9 @@ class GaussianFaultClassifier:
     """Regularised QDA with a broad background ("unknown") class (see the module docstring)."""
 
     def __init__(self, background_scale: float = 3.0, background_prior: float = 0.02, covariance: str = "pooled"):
-        if covariance not in ("pooled", "class"):
-            raise ValueError(f"fault classifier: covariance {covariance!r} must be 'pooled' (LDA) or 'class' (QDA)")
+        if covariance not in COVARIANCES:
+            raise ValueError(f"fault classifier: covariance {covariance!r} must be one of {', '.join(COVARIANCES)} "
+                             "('pooled': LDA, 'class': QDA, 'diagonal': the pooled within-class variances only)")
         self.covariance = covariance
         self.background_scale = float(background_scale)
         self.background_prior = float(background_prior)
@@ -139,7 +144,12 @@ class GaussianFaultClassifier:
         for c in self.classes:
             Xc = Xf[y == c]
             Sc = np.cov(Xc.T, bias=True) if len(Xc) > 1 else np.zeros((d, d))
-            self.covs[c] = pooled if self.covariance == "pooled" else (len(Xc) * Sc + nu * pooled) / (len(Xc) + nu) + jitter
+            if self.covariance == "pooled":
+                self.covs[c] = pooled
+            elif self.covariance == "diagonal":
+                self.covs[c] = np.diag(np.diag(pooled))
+            else:
+                self.covs[c] = (len(Xc) * Sc + nu * pooled) / (len(Xc) + nu) + jitter
         keep = np.isin(y, self.classes)
         self.mu_all = Xf[keep].mean(axis=0)
         self.cov_all = np.cov(Xf[keep].T) + jitter
@@ -194,6 +204,47 @@ class GaussianFaultClassifier:
 
     def save(self, path) -> None:
         Path(path).write_text(json.dumps(self.to_json(), indent=1))
+
+
+def macro_recall(y_true: Sequence[str], y_pred: Sequence[str]) -> float:
+    """Mean over the true classes present of the fraction predicted right (balanced accuracy: a fleet's fault mix
+    is not the training fleet's, so no class weighs by its count)."""
+    yt, yp = np.asarray(list(y_true)), np.asarray(list(y_pred))
+    rec = [float(np.mean(yp[yt == c] == c)) for c in CLASSES if (yt == c).any()]
+    return float(np.mean(rec)) if rec else math.nan
+
+
+def fit_across_plants(X: np.ndarray, y: Sequence[str], plants: Sequence[str],
+                      candidates: Sequence[str] = COVARIANCES, **kw) -> GaussianFaultClassifier:
+    """The classifier fitted on every row, its covariance structure (:data:`COVARIANCES`) chosen by
+    leave-one-plant-out cross-validation: each candidate is fitted on all plants but one and scored (macro recall,
+    "unknown" counted wrong) on the one left out; the one with the best mean over the plants is kept (ties: the
+    earlier candidate). What is chosen is what transfers to a plant the fit has not seen, which is how the classifier
+    is used. With fewer than two plants there is nothing to hold out: the first candidate is fitted and
+    ``info["covariance_choice"]`` says so."""
+    X = np.asarray(X, float)
+    y = np.asarray(list(y))
+    g = np.asarray([str(v) for v in plants])
+    if len(g) != len(y):
+        raise ValueError(f"fault classifier: {len(g)} plant labels for {len(y)} rows")
+    cands = [str(c) for c in candidates]
+    names = sorted(set(g))
+    scores: dict[str, dict[str, float]] = {c: {} for c in cands}
+    for held in names if len(names) >= 2 else []:
+        tr, te = g != held, g == held
+        if sum(int((y[tr] == c).sum() >= 2) for c in CLASSES) < 2:
+            continue  # the other plants alone cannot be fitted (fewer than two classes with two rows)
+        for c in cands:
+            m = GaussianFaultClassifier(covariance=c, **kw).fit(X[tr], y[tr])
+            scores[c][held] = macro_recall(y[te], m.predict(X[te]))
+    mean = {c: float(np.mean(list(v.values()))) if v else math.nan for c, v in scores.items()}
+    ok = [c for c in cands if math.isfinite(mean[c])]
+    best = max(ok, key=lambda c: (mean[c], -cands.index(c))) if ok else cands[0]
+    m = GaussianFaultClassifier(covariance=best, **kw).fit(X, y)
+    m.info["covariance_choice"] = ({"rule": "leave-one-plant-out macro recall", "plants": names, "chosen": best,
+                                    "mean_macro_recall": mean, "per_plant": scores}
+                                   if ok else {"rule": f"one plant only ({', '.join(names)}): {best}, not chosen"})
+    return m
 
 
 class NearestCentroid:

@@ -92,17 +92,22 @@ def _train(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from hd_ground.fleet.classify import CLASSES, GaussianFaultClassifier, snapshot_features
+    from hd_ground.fleet.classify import CLASSES, GaussianFaultClassifier, fit_across_plants, snapshot_features
     from hd_ground.fleet.store import FleetStore
 
     st = FleetStore(args.store)
     labels: dict[tuple[str, int], str] = {}
+    plant_of: dict[str, str] = {}
     with open(args.labels) as f:
         for i, r in enumerate(csv.DictReader(f)):
             if r.get("label") not in CLASSES:
                 raise ValueError(f"{args.labels} row {i + 2}: label {r.get('label')!r} not one of {CLASSES}")
             labels[(r["actuator_id"], int(r["mission_index"]))] = r["label"]
-    X, y = [], []
+            pl = (r.get("plant") or "").strip()
+            if plant_of.setdefault(r["actuator_id"], pl) != pl:
+                raise ValueError(f"{args.labels} row {i + 2}: {r['actuator_id']} is plant {pl!r} here and "
+                                 f"{plant_of[r['actuator_id']]!r} above (one plant type per actuator)")
+    X, y, g = [], [], []
     for aid in sorted({a for a, _ in labels}):
         stats, feats = st.read_mission_rows(aid, "residual_stats"), st.read_mission_rows(aid, "features")
         for (a, k), lab in labels.items():
@@ -112,11 +117,21 @@ def _train(args: argparse.Namespace) -> int:
             if x is not None:
                 X.append(x)
                 y.append(lab)
+                g.append(plant_of.get(aid, ""))
     if not X:
         raise ValueError(f"{args.labels}: no labelled mission after the reference missions is in {st.root}")
-    m = GaussianFaultClassifier().fit(np.array(X), y)
+    plants = sorted(set(g) - {""})
+    if plants and "" in g:
+        raise ValueError(f"{args.labels}: the plant column is empty for some actuators; give every actuator its "
+                         "plant type or none")
+    if len(plants) >= 2:  # several plant types: choose the structure that transfers to one left out
+        m = fit_across_plants(np.array(X), y, g)
+        how = f"covariance {m.covariance} by leave-one-plant-out over {', '.join(plants)}"
+    else:
+        m = GaussianFaultClassifier().fit(np.array(X), y)
+        how = "one plant type: pooled covariance (give a plant column with >= 2 types to choose it)"
     m.save(args.out)
-    print(f"wrote {args.out}: {len(X)} training snapshots, classes {m.counts}")
+    print(f"wrote {args.out}: {len(X)} training snapshots, classes {m.counts}; {how}")
     return 0
 
 
@@ -163,7 +178,11 @@ def register(subparsers) -> None:
     q.add_argument("--format", choices=("tsv", "csv", "json"), default="tsv")
     q.set_defaults(func=_query)
     t = fs.add_parser("train-classifier", help="fit the fault classifier on a store and labels (CSV: actuator_id, "
-                                               "mission_index, label)")
+                                               "mission_index, label[, plant])",
+                      description="Labels CSV: actuator_id, mission_index, label (healthy, tooth_wear, "
+                                  "lubrication_loss, flexspline_stiffness_loss) and optionally plant (the actuator's "
+                                  "plant type): with >= 2 plant types the class densities' covariance structure (pooled, "
+                                  "per class, diagonal) is chosen by leave-one-plant-out cross-validation.")
     t.add_argument("--store", required=True)
     t.add_argument("--labels", required=True)
     t.add_argument("--out", required=True)
