@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import zlib
 from pathlib import Path
 from typing import Any, Iterable, Mapping
@@ -97,20 +98,30 @@ def simulate_life(params: Mapping[str, Any], n_missions: int, out_dir: str | os.
     if out_dir is not None:
         adir = Path(out_dir) / aid
         adir.mkdir(parents=True, exist_ok=True)
-    from .plant import simulate_mission
 
     for m in range(n_missions):
         mseed = int(np.random.default_rng([int(seed), int(params.get("seed", 0)), zlib.crc32(aid.encode()), m]).integers(2**31))
         prof = profiles[m % len(profiles)]
         fault = onset_fault(health, effects, m, duration, mseed)
-        mission, truth = simulate_mission(params, effects, prof, mseed, duration=duration, fs=fs, health=health,
-                                          mission_index=m, operating_hours=hours, n_sub=n_sub, fault=fault)
+        try:
+            mission, truth, refined = _mission_refining(params, effects, prof, mseed, duration=duration, fs=fs,
+                                                        health=health, mission_index=m, operating_hours=hours,
+                                                        n_sub=n_sub, fault=fault)
+        except FloatingPointError as e:
+            if not rows:
+                raise FloatingPointError(f"{aid}: {e}") from None
+            # the unit's life ends where the plant cannot be simulated; what was simulated is kept (bags, truth)
+            rows[-1]["life_ended"] = f"plant diverged in mission {m}: {e}"
+            print(f"{aid}: life ended before mission {m}: {e}", file=sys.stderr, flush=True)
+            break
         failed = 0.5 * (health["h_plus"] + health["h_minus"]) >= params["h_fail"]
         rec = {"mission_index": m, "seed": mseed, "profile": prof, "operating_hours": hours,
                **{k: float(v) for k, v in health.items()}, "h": 0.5 * (health["h_plus"] + health["h_minus"]),
                **truth["wear"], "failed": bool(failed)}
         if fault is not None:
             rec["fault"] = truth["effects"]["fault"]
+        if refined is not None:
+            rec["n_sub"] = refined  # integrated with a finer step than the default (it diverged there)
         if out_dir is not None:
             from hd_bag import write_mission
 
@@ -133,11 +144,43 @@ def simulate_life(params: Mapping[str, Any], n_missions: int, out_dir: str | os.
     return rows
 
 
+#: how many times a diverging mission is re-integrated with the internal step halved before the life ends there
+REFINE_STEPS = 2
+
+
+def _mission_refining(params, effects, prof, mseed, *, fs: float, n_sub: int | None, **kw):
+    """``simulate_mission``; where the explicit integration diverges (a stiff contact inside the backlash gap of a
+    worn unit, beyond the default step's stability limit), the same mission again with the internal step halved, up
+    to :data:`REFINE_STEPS` times (the seeds are unchanged, so the mission is the same one, only integrated more
+    finely). Missions that do not diverge are untouched (bit for bit). Returns (mission, truth, the finer n_sub or
+    None); raises the last FloatingPointError, naming the steps tried, if every step diverged."""
+    from .plant import default_n_sub, simulate_mission
+
+    base = int(n_sub) if n_sub is not None else default_n_sub(fs)
+    tried = []
+    for k in range(REFINE_STEPS + 1):
+        ns = base * 2**k
+        if ns > 1000:
+            break
+        try:
+            mission, truth = simulate_mission(params, effects, prof, mseed, fs=fs, n_sub=n_sub if k == 0 else ns,
+                                              **kw)
+            return mission, truth, (ns if k else None)
+        except FloatingPointError as e:
+            tried.append(ns)
+            err = e
+    raise FloatingPointError(f"{err} (n_sub tried: {', '.join(map(str, tried))})")
+
+
 def _life_worker(args):
+    """(actuator_id, mission records, or the message of a plant that cannot simulate its first mission)."""
     params, n_missions, out_dir, kw = args
     q = _QUEUE
     tick = (lambda: q.put(1)) if q is not None else None
-    return params["actuator_id"], simulate_life(params, n_missions, out_dir, tick=tick, **kw)
+    try:
+        return params["actuator_id"], simulate_life(params, n_missions, out_dir, tick=tick, **kw)
+    except FloatingPointError as e:
+        return params["actuator_id"], str(e)
 
 
 _QUEUE = None
@@ -195,7 +238,10 @@ def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike
     bar = tqdm(total=n_actuators * n_missions, unit="mission", desc="sim fleet", disable=not progress)
     if workers <= 1:
         for params, n_m, od, kw_u in jobs:
-            results[params["actuator_id"]] = simulate_life(params, n_m, od, tick=lambda: bar.update(1), **kw_u)
+            try:
+                results[params["actuator_id"]] = simulate_life(params, n_m, od, tick=lambda: bar.update(1), **kw_u)
+            except FloatingPointError as e:
+                results[params["actuator_id"]] = str(e)
     else:
         import multiprocessing as mp
 
@@ -212,6 +258,14 @@ def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike
             while not q.empty():
                 bar.update(q.get())
     bar.close()
+    # a unit whose plant cannot simulate even its first mission is left out, and said so (the plant failed, not
+    # the unit: its parameter draw is beyond what the integrator handles)
+    left_out = {a: r for a, r in results.items() if isinstance(r, str)}
+    for a, msg in left_out.items():
+        print(f"sim fleet: {a} left out: {msg}", file=sys.stderr, flush=True)
+    keep = [(p, u) for p, u in zip(pop, units) if p["actuator_id"] not in left_out]
+    if not keep:
+        raise FloatingPointError(f"no actuator could be simulated: {next(iter(left_out.values()))}")
     summary = {
         "seed": seed, "duration_s": duration, "fs": fs, "effects": effects.to_json_dict(),
         **({"family": fam.name} if fam.name != "default" else {}),
@@ -221,9 +275,12 @@ def simulate_fleet(n_actuators: int, n_missions: int, out_dir: str | os.PathLike
              "params": {k: v for k, v in p.items() if k != "effect_scale"},
              "effect_scale": p.get("effect_scale", {}),
              "eol_mission": next((r["mission_index"] for r in results[p["actuator_id"]] if r["failed"]), None),
-             "missions": results[p["actuator_id"]]}
-            for p, u in zip(pop, units)
+             "missions": results[p["actuator_id"]],
+             **({"life_ended": results[p["actuator_id"]][-1]["life_ended"]}
+                if results[p["actuator_id"]] and "life_ended" in results[p["actuator_id"]][-1] else {})}
+            for p, u in keep
         ],
+        **({"left_out": left_out} if left_out else {}),
     }
     with open(out / "fleet_truth.json", "w") as f:
         json.dump(summary, f, indent=1, default=float)

@@ -16,7 +16,9 @@ import sys
 
 #: Exceptions that mean bad input, not a bug: reported as one line, exit status 1.
 #: (``hd_bag.BagError`` is a ValueError; numpy/scipy refuse bad arrays with ValueError.)
-USER_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError)
+#: FloatingPointError: a simulation or training that diverged (the messages say where and what to change)
+USER_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, IsADirectoryError, PermissionError,
+               FloatingPointError)
 
 #: Modules that add sub-commands, in the order ``hdphm --help`` shows them.
 COMMAND_MODULES = (
