@@ -126,7 +126,8 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
     from hd_onboard import features as _feat
 
     key = [[str(b), b.stat().st_size, b.stat().st_mtime_ns] for b in bags] + [
-        include_truth, list(_feat.FEATURE_NAMES), f"mission_observation v2 (coherent orders) of {OBS_WINDOW_S} s onboard windows"]
+        include_truth, list(_feat.FEATURE_NAMES), f"mission_observation v2 (coherent orders) of {OBS_WINDOW_S} s onboard windows",
+        "second copies of a recording dropped"]
     if cache and Path(cache).exists():
         try:
             d = json.loads(Path(cache).read_text())
@@ -134,7 +135,7 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
                 return ActuatorData.from_json(d["data"])
         except (json.JSONDecodeError, KeyError, TypeError):
             pass
-    rows, errors, truth, h_fail, aid = [], [], [], [], None
+    rows, errors, truth, h_fail, aid, ident = [], [], [], [], None, []
     for i, b in enumerate(bags):
         try:
             m = read_mission(b, include_sim=include_truth)
@@ -157,6 +158,7 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
         f["path"] = str(b)
         f["gear_ratio"] = float(m.meta.gear_ratio)  # the observation model holds for one transmission type
         rows.append(f)
+        ident.append((int(m.meta.mission_index), _recording_digest(m)))
         if include_truth:
             hh = m.sim.get(TOPIC_HEALTH, {})
             truth.append(float(hh.get("h", np.nan)))
@@ -168,6 +170,22 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
     o = np.lexsort(([r["path"] for r in rows], [r["operating_hours"] for r in rows],
                     [r["mission_index"] for r in rows]))
     rows = [rows[i] for i in o]
+    ident = [ident[i] for i in o]
+    # the same recording twice (a copied bag: same mission_index, first stamp and length): one is kept, said so
+    seen: dict[tuple, str] = {}
+    keep = []
+    for j, (r, idn) in enumerate(zip(rows, ident)):
+        if idn in seen:
+            msg = (f"{bag_dir}: {r['path']} is a second copy of mission {idn[0]} ({seen[idn]}: the same samples); "
+                   "one kept")
+            print(f"warning: {msg}", file=sys.stderr)
+            errors.append(msg)
+            continue
+        seen[idn] = r["path"]
+        keep.append(j)
+    if len(keep) < len(rows):
+        o = np.asarray(o)[keep]
+        rows = [rows[j] for j in keep]
     mi = np.array([r["mission_index"] for r in rows], int)
     if np.any(np.diff(mi) == 0):
         # bags from other tools may repeat mission_index: keep (index, hours, file) order, renumber, say so
@@ -198,6 +216,20 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
         Path(cache).parent.mkdir(parents=True, exist_ok=True)
         Path(cache).write_text(json.dumps({"key": key, "data": a.to_json()}))
     return a
+
+
+def _recording_digest(m) -> str:
+    """A digest of one recording's samples (stamps, angles, torques): equal for two copies of a bag, different for
+    two recordings, even when another tool gives both the same mission_index and start stamp."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=16)
+    h.update(str((int(getattr(m, "t0_ns", 0) or 0), int(m.n))).encode())
+    for name in ("t", "theta_m", "theta_f", "tau_m", "Q_red"):
+        v = getattr(m, name, None)
+        if v is not None:
+            h.update(np.ascontiguousarray(v, dtype=np.float64).tobytes())
+    return h.hexdigest()
 
 
 def _feature_dict(a: ActuatorData) -> dict[str, np.ndarray]:

@@ -246,3 +246,27 @@ def test_onboard_eval_runs_on_foreign_bags(foreign_bags, tmp_path, capsys):
     assert rep["n_scored"] == 4, rep
     rc = main(["onboard", "eval", str(foreign_bags["no_kt"]), "--quiet"])
     assert rc != 0 and "torque_constant" in capsys.readouterr().err
+
+
+def test_a_copied_bag_is_one_mission_not_a_renumbering(tmp_path, capsys):
+    """The same recording twice in an actuator folder (a copied bag) is kept once, said so; the mission indices
+    stay those of the metadata, so an events file still points at the right missions. Two *different* recordings
+    with one mission_index and one start stamp (a tool on simulated time without a counter) are both kept."""
+    import shutil
+
+    from hd_prognostic.pipeline import extract_actuator
+
+    plain = FB.replace(FB.VARIANTS["plain"], sim={"duration": 1.0})
+    for k in range(4):
+        FB.write_variant(tmp_path / "a", FB.replace(plain, name=f"m{k}"), seed=k, mission_index=k,
+                         operating_hours=10.0 * k, actuator_id="FX-C")
+    shutil.copy(tmp_path / "a" / "m1.mcap", tmp_path / "a" / "copy_of_m1.mcap")
+    a = extract_actuator(tmp_path / "a")
+    assert list(a.mission_index) == [0, 1, 2, 3] and len(a.paths) == 4
+    assert any("second copy of mission 1" in s for s in a.errors)
+    for k in range(2):
+        FB.write_variant(tmp_path / "z", FB.replace(plain, name=f"z{k}"), seed=k, mission_index=0,
+                         operating_hours=0.0, actuator_id="FX-Z")
+    z = extract_actuator(tmp_path / "z")
+    assert len(z.paths) == 2 and list(z.mission_index) == [0, 1]  # not copies: renumbered, as before
+    assert not any("second copy" in s for s in z.errors)
