@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from hd_prognostic import metrics as M
-from hd_prognostic.pipeline import ActuatorData, build_model, extract_actuator, find_actuator_dirs, fit_population, mission_sequence, prognose
+from hd_prognostic.pipeline import (ActuatorData, build_model, extract_actuator,
+                                    find_actuator_groups, fit_population, mission_sequence, prognose)
 from hd_prognostic.observation import ObservationModel
 from hd_prognostic.rul import rul_distribution
 
@@ -27,15 +28,15 @@ STUDY_FEATURES = ("HF_MTW_IF", "ke_2x", "ke_1x", "ke_4x", "lost_motion", "hyster
 
 
 def _extract_one(args):
-    d, cache = args
+    d, bags, cache = args
     t0 = time.perf_counter()
-    return extract_actuator(d, include_truth=True, cache=cache), time.perf_counter() - t0
+    return extract_actuator(d, include_truth=True, cache=cache, bags=bags), time.perf_counter() - t0
 
 
 def load_fleet(fleet_dir, cache_dir=None, progress: bool = True, workers: int = 1) -> list[ActuatorData]:
     """Features + wear truth of every actuator folder (cached per actuator; ``workers`` processes)."""
-    jobs = [(d, Path(cache_dir) / f"{d.name}.features.json" if cache_dir else None)
-            for d in find_actuator_dirs(fleet_dir)]
+    jobs = [(Path(fleet_dir) / name, bags, Path(cache_dir) / f"{name}.features.json" if cache_dir else None)
+            for name, bags in find_actuator_groups(fleet_dir)]
     if workers > 1 and len(jobs) > 1:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -48,7 +49,7 @@ def load_fleet(fleet_dir, cache_dir=None, progress: bool = True, workers: int = 
             if progress:
                 print(f"  {j[0].name}: {len(results[-1][0].paths)} missions ({results[-1][1]:.0f} s)", flush=True)
     out = []
-    for (d, _), (a, dt) in zip(jobs, results):
+    for (d, _, _), (a, dt) in zip(jobs, results):
         if progress:
             print(f"{d.name}: {len(a.paths)} missions, EOL mission {a.eol_mission()}, {dt:.1f} s", flush=True)
         out.append(a)

@@ -101,18 +101,43 @@ def find_bags(bag_dir: str | os.PathLike) -> list[Path]:
     return bags
 
 
-def find_actuator_dirs(fleet_dir: str | os.PathLike) -> list[Path]:
+def find_actuator_groups(fleet_dir: str | os.PathLike) -> list[tuple[str, list[Path]]]:
+    """Each actuator's (name, bags) in a fleet folder: one sub-folder per actuator (the layout ``hdphm sim fleet``
+    writes; the name is the folder's), or, where the folder holds the bags themselves (another tool's flat layout),
+    its bags grouped by the ``actuator_id`` of their metadata (a bag whose metadata cannot be read is named in the
+    error)."""
     d = Path(fleet_dir)
     if not d.is_dir():
         raise FileNotFoundError(f"{d}: not a directory")
     dirs = sorted(p for p in d.iterdir() if p.is_dir() and not (p / "metadata.yaml").is_file() and _mission_bags(p))
-    if not dirs:
-        raise FileNotFoundError(f"{d}: no actuator folders with .mcap bags")
-    return dirs
+    flat = _mission_bags(d)
+    if dirs and flat:
+        raise ValueError(f"{d}: holds both actuator folders ({dirs[0].name}, ...) and bags of its own "
+                         f"({flat[0].name}, ...): one layout per fleet folder")
+    if dirs:
+        return [(p.name, _mission_bags(p)) for p in dirs]
+    if not flat:
+        raise FileNotFoundError(f"{d}: no actuator folders with .mcap bags and no bags of its own")
+    from hd_bag.mcapio import read_metadata
+
+    groups: dict[str, list[Path]] = {}
+    for b in flat:
+        try:
+            aid = str(read_metadata(b).get("hd_mission", {}).get("actuator_id", "")).strip()
+        except Exception as e:  # noqa: BLE001 - any unreadable bag is named, not a traceback
+            raise ValueError(f"{b}: cannot read its hd_mission metadata to group the flat fleet folder by "
+                             f"actuator ({e})") from None
+        if not aid:
+            raise ValueError(f"{b}: no actuator_id in its hd_mission metadata: cannot group the flat fleet folder")
+        groups.setdefault(aid, []).append(b)
+    print(f"note: {d}: bags grouped by their metadata's actuator_id ({len(groups)} actuators, no actuator folders)",
+          file=sys.stderr)
+    return sorted(groups.items())
 
 
 def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False, cfg=None,
-                     cache: str | os.PathLike | None = None, progress: bool = False) -> ActuatorData:
+                     cache: str | os.PathLike | None = None, progress: bool = False,
+                     bags: list[Path] | None = None) -> ActuatorData:
     """Features of every bag in ``bag_dir`` (one actuator), sorted by ``mission_index``.
 
     Unreadable bags are skipped and listed in ``errors`` (file and reason);
@@ -122,7 +147,7 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
     from hd_bag import BagError, read_mission
     from hd_onboard.features import OBS_WINDOW_S, mission_observation_features
 
-    bags = find_bags(bag_dir)
+    bags = find_bags(bag_dir) if bags is None else sorted(Path(b) for b in bags)
     from hd_onboard import features as _feat
 
     key = [[str(b), b.stat().st_size, b.stat().st_mtime_ns] for b in bags] + [
@@ -495,8 +520,9 @@ def unit_history(a: ActuatorData, feature: str = "HF_MTW_IF", exposure: str = "l
 def load_fleet_histories(fleet_dir, feature: str = "HF_MTW_IF", exposure: str = "load", cache_dir=None,
                          workers: int = 1, progress: bool = False):
     """Every actuator folder of a fleet -> (ActuatorData list, UnitHistory list); contract topics only."""
-    dirs = find_actuator_dirs(fleet_dir)
-    jobs = [(d, Path(cache_dir) / f"{d.name}.contract.features.json" if cache_dir else None) for d in dirs]
+    groups = find_actuator_groups(fleet_dir)
+    jobs = [(Path(fleet_dir) / name, bags, Path(cache_dir) / f"{name}.contract.features.json" if cache_dir else None)
+            for name, bags in groups]
     if workers > 1 and len(jobs) > 1:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -511,5 +537,5 @@ def load_fleet_histories(fleet_dir, feature: str = "HF_MTW_IF", exposure: str = 
 
 
 def _extract_contract(job):
-    d, cache = job
-    return extract_actuator(d, include_truth=False, cache=cache)
+    d, bags, cache = job
+    return extract_actuator(d, include_truth=False, cache=cache, bags=bags)

@@ -270,3 +270,34 @@ def test_a_copied_bag_is_one_mission_not_a_renumbering(tmp_path, capsys):
     z = extract_actuator(tmp_path / "z")
     assert len(z.paths) == 2 and list(z.mission_index) == [0, 1]  # not copies: renumbered, as before
     assert not any("second copy" in s for s in z.errors)
+
+
+def test_a_flat_fleet_folder_is_grouped_by_actuator_id(tmp_path, capsys):
+    """Another tool's fleet: every bag of every actuator in one folder. The units are the metadata's actuator_ids,
+    with the same histories as the one-folder-per-actuator layout; a folder mixing both layouts is refused."""
+    import shutil
+
+    from hd_prognostic.pipeline import extract_actuator, find_actuator_groups, load_fleet_histories
+
+    plain = FB.replace(FB.VARIANTS["plain"], sim={"duration": 1.0})
+    for aid in ("FX-A", "FX-B"):
+        for k in range(3):
+            FB.write_variant(tmp_path / "tree" / aid, FB.replace(plain, name=f"{aid}_m{k}"), seed=k,
+                             mission_index=k, operating_hours=10.0 * k, actuator_id=aid)
+    (tmp_path / "flat").mkdir()
+    for b in sorted((tmp_path / "tree").rglob("*.mcap")):
+        shutil.copy(b, tmp_path / "flat" / b.name)
+    g = find_actuator_groups(tmp_path / "flat")
+    assert [(n, len(b)) for n, b in g] == [("FX-A", 3), ("FX-B", 3)]
+    assert "grouped by their metadata's actuator_id" in capsys.readouterr().err
+    flat = [extract_actuator(tmp_path / "flat" / n, bags=b) for n, b in g]
+    tree = [extract_actuator(tmp_path / "tree" / n) for n, _ in g]
+    assert [a.actuator_id for a in flat] == [a.actuator_id for a in tree] == ["FX-A", "FX-B"]
+    for a, b in zip(flat, tree):
+        assert list(a.mission_index) == list(b.mission_index) == [0, 1, 2]
+        np.testing.assert_array_equal(a.feature("W_load"), b.feature("W_load"))
+    with pytest.raises(ValueError, match="never computable"):  # the fleet loader takes the flat folder too
+        load_fleet_histories(tmp_path / "flat", exposure="missions")  # (1 s missions: too short for the HI)
+    shutil.copy(tmp_path / "flat" / "FX-A_m0.mcap", tmp_path / "tree" / "stray.mcap")
+    with pytest.raises(ValueError, match="one layout per fleet folder"):
+        find_actuator_groups(tmp_path / "tree")
