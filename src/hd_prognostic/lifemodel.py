@@ -101,6 +101,29 @@ def _open_text(p: Path) -> io.StringIO:
         raise ValueError(f"{p}: not UTF-8 text (byte {e.start}: {e.reason}); expected a CSV file") from None
 
 
+def _csv_rows(f: io.StringIO):
+    """A :mod:`csv` reader over ``f`` in the file's own delimiter: comma, or semicolon / tab where the header line
+    has one of those and no comma (spreadsheet exports in locales with a decimal comma, TSV)."""
+    head = f.readline()
+    f.seek(0)
+    delim = ","
+    if "," not in head:
+        delim = next((d for d in (";", "\t") if d in head), ",")
+    return csv.reader(f, delimiter=delim)
+
+
+def _number(text: str, rd) -> float:
+    """``float(text)``; in a semicolon-separated file a decimal comma ("0,5") is read as the decimal point it is."""
+    if rd.dialect.delimiter == ";" and "," in text and "." not in text:
+        text = text.replace(",", ".")
+    return float(text)
+
+
+def _header(row: list[str]) -> list[str]:
+    """Column names as the readers match them: stripped, lower case."""
+    return [h.strip().lower() for h in row]
+
+
 def read_events(path: str | Path) -> dict[str, UnitEvents]:
     """Parse an events CSV (columns :data:`EVENT_COLUMNS`); every error names the file and row."""
     p = Path(path)
@@ -108,9 +131,9 @@ def read_events(path: str | Path) -> dict[str, UnitEvents]:
         raise FileNotFoundError(f"{p}: events file not found")
     out: dict[str, UnitEvents] = {}
     with _open_text(p) as f:
-        rd = csv.reader(f)
+        rd = _csv_rows(f)
         try:
-            head = [h.strip() for h in next(rd)]
+            head = _header(next(rd))
         except StopIteration:
             raise ValueError(f"{p}: empty events file (expected header {','.join(EVENT_COLUMNS)})") from None
         miss = [c for c in EVENT_COLUMNS[:3] if c not in head]
@@ -130,7 +153,7 @@ def read_events(path: str | Path) -> dict[str, UnitEvents]:
             if kind not in EVENT_KINDS:
                 raise ValueError(f"{where}: event {row[ix['event']]!r} is not one of {', '.join(EVENT_KINDS)}")
             try:
-                t = float(row[ix["mission_index"]])
+                t = _number(row[ix["mission_index"]], rd)
             except ValueError:
                 raise ValueError(f"{where}: mission_index {row[ix['mission_index']]!r} is not a number") from None
             if not math.isfinite(t) or t < 0:
@@ -141,7 +164,7 @@ def read_events(path: str | Path) -> dict[str, UnitEvents]:
                 if not q:
                     raise ValueError(f"{where}: inspection without a quantity")
                 try:
-                    v = float(row[ix["value"]]) if "value" in ix else float("nan")
+                    v = _number(row[ix["value"]], rd) if "value" in ix else float("nan")
                 except ValueError:
                     raise ValueError(f"{where}: inspection value {row[ix['value']]!r} is not a number") from None
                 if not math.isfinite(v):
@@ -343,9 +366,9 @@ def read_hi_csv(path: str | Path) -> list[UnitHistory]:
         raise FileNotFoundError(f"{p}: health-indicator CSV not found")
     rows: dict[str, list[tuple[float, float, float]]] = {}
     with _open_text(p) as f:
-        rd = csv.reader(f)
+        rd = _csv_rows(f)
         try:
-            head = [h.strip() for h in next(rd)]
+            head = _header(next(rd))
         except StopIteration:
             raise ValueError(f"{p}: empty file (expected header unit,time,hi[,exposure])") from None
         for c in ("unit", "time", "hi"):
@@ -357,8 +380,8 @@ def read_hi_csv(path: str | Path) -> list[UnitHistory]:
             if not r or all(not c.strip() for c in r):
                 continue
             try:
-                t, y = float(r[it]), float(r[ih]) if r[ih].strip() else float("nan")
-                e = float(r[ie]) if ie is not None else t
+                t, y = _number(r[it], rd), _number(r[ih], rd) if r[ih].strip() else float("nan")
+                e = _number(r[ie], rd) if ie is not None else t
             except (ValueError, IndexError):
                 raise ValueError(f"{p}: row {n}: time/hi/exposure not numbers: {r!r}") from None
             if not math.isfinite(t) or not math.isfinite(e):

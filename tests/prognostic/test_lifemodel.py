@@ -99,6 +99,34 @@ def test_events_and_hi_csv_not_text_named(tmp_path):
     assert read_events(p)["A"].failure == 3.0
 
 
+def test_spreadsheet_exports_read_the_same(tmp_path):
+    """Semicolon-separated with decimal commas (a spreadsheet in a decimal-comma locale), tab-separated, headers in
+    another case: the same events and histories as the plain CSV."""
+    plain_ev = "actuator_id,mission_index,event,quantity,value\nA,3,failure,,\nB,2,inspection,lost_motion,0.00025\n"
+    plain_hi = "unit,time,hi,exposure\nA,0,0.5,0\nA,1,0.75,1.5\nA,2,1.25,3.5\n"
+    variants = {"semicolon": (plain_ev.replace(",", ";").replace("0.00025", "0,00025"),
+                              plain_hi.replace(",", ";").replace(".", ",")),
+                "tab": (plain_ev.replace(",", "\t"), plain_hi.replace(",", "\t")),
+                "case": (plain_ev.replace("actuator_id,mission_index,event", "Actuator_ID,Mission_Index,EVENT"),
+                         plain_hi.replace("unit,time,hi", "Unit,Time,HI"))}
+    (tmp_path / "e.csv").write_text(plain_ev)
+    (tmp_path / "h.csv").write_text(plain_hi)
+    ev0 = read_events(tmp_path / "e.csv")
+    hi0 = read_hi_csv(tmp_path / "h.csv")[0]
+    assert ev0["B"].inspections == [(2.0, "lost_motion", 0.00025)]
+    for name, (ev, hi) in variants.items():
+        (tmp_path / f"e_{name}.csv").write_text(ev)
+        (tmp_path / f"h_{name}.csv").write_text(hi)
+        e = read_events(tmp_path / f"e_{name}.csv")
+        assert {k: (v.failure, v.inspections) for k, v in e.items()} == \
+            {k: (v.failure, v.inspections) for k, v in ev0.items()}, name
+        h = read_hi_csv(tmp_path / f"h_{name}.csv")[0]
+        assert h.unit == "A" and np.array_equal(h.y, hi0.y) and np.array_equal(h.E, hi0.E), name
+    (tmp_path / "bad.csv").write_text("unit;time;hi\nA;0;0,5,1\n")  # not a number in any locale: named
+    with pytest.raises(ValueError, match="bad.csv: row 2"):
+        read_hi_csv(tmp_path / "bad.csv")
+
+
 def test_events_roundtrip_and_docs_example(tmp_path):
     from pathlib import Path
 
