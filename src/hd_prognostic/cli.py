@@ -37,10 +37,27 @@ def _write_history(out: Path, hist, stem: str = "rul_history") -> None:
             f.write(",".join(str(v) for v in [t, hist.z[i], *vals, *hist.state_mean[i], hist.ess[i]]) + "\n")
 
 
+def _one_actuator(args):
+    """The one actuator ``prognose`` reads from the folder ``args.bag_dir``: every bag in it, or with ``--unit`` the
+    unit's among several (a flat folder of a fleet, by metadata ``actuator_id``; a fleet of actuator folders, by
+    folder name)."""
+    from hd_prognostic.pipeline import extract_actuator, find_actuator_groups
+
+    if not args.unit:  # one actuator's folder: every bag in it (the reader refuses another actuator's, by name)
+        return extract_actuator(args.bag_dir, include_truth=False, progress=True)
+    groups = find_actuator_groups(args.bag_dir)
+    names = [n for n, _ in groups]
+    groups = [g for g in groups if g[0] == args.unit]
+    if not groups:
+        raise ValueError(f"{args.bag_dir}: no actuator {args.unit!r} (it holds {', '.join(names[:8])}"
+                         f"{', ...' if len(names) > 8 else ''})")
+    return extract_actuator(args.bag_dir, include_truth=False, progress=True, bags=groups[0][1])
+
+
 def _prognose(args) -> int:
     if args.model:
         return _prognose_life(args)
-    from hd_prognostic.pipeline import DEFAULT_OBS_MODEL, build_model, extract_actuator, prognose
+    from hd_prognostic.pipeline import DEFAULT_OBS_MODEL, build_model, prognose
     from hd_prognostic.observation import ObservationModel
     from hd_prognostic.plots import save_snapshot, save_state_history
 
@@ -51,7 +68,7 @@ def _prognose(args) -> int:
         return 2
     obs = ObservationModel.from_json(obs_path)
     out = Path(args.out)
-    a = extract_actuator(args.bag_dir, include_truth=False, progress=True)
+    a = _one_actuator(args)
     n = len(a.mission_index)
     hist = prognose(a, obs, n_particles=args.particles, seed=args.seed, likelihood=args.likelihood,
                     snapshots=() if args.no_plots else (max(0, n // 2), max(0, n - 1)), progress=True)
@@ -321,11 +338,11 @@ def _prognose_life(args) -> int:
             raise ValueError(f"{src}: {len(units)} units in the file; choose one with --unit")
         u = units[0]
     else:
-        from hd_prognostic.pipeline import extract_actuator, unit_history
+        from hd_prognostic.pipeline import unit_history
 
         if model.exposure not in ("missions", "hours", "load"):
             raise ValueError(f"{args.model}: fitted on CSV exposure ({model.exposure}); give a CSV file")
-        a = extract_actuator(src, include_truth=False, progress=True)
+        a = _one_actuator(args)
         u = unit_history(a, model.feature, model.exposure)
     notes = attach_events([u], {k: v for k, v in ev.items() if k == u.unit}, str(args.events))
     if u.events.failure is not None:  # prognosis of a failed unit: its record before the failure only
@@ -380,7 +397,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="life model from 'hdphm prognostic fit' (failures/removals/inspections); without it the "
                         "older wear-truth-calibrated particle filter runs (--obs-model)")
     p.add_argument("--events", default=None, help="events CSV: this unit's inspections are used (life model)")
-    p.add_argument("--unit", default=None, help="unit of a multi-unit CSV")
+    p.add_argument("--unit", default=None, help="unit of a multi-unit CSV, or actuator of a folder holding several "
+                                                "(a flat fleet folder: by metadata actuator_id; actuator folders: by name)")
     p.add_argument("--samples", type=int, default=2000, help="RUL samples per prediction (life model)")
     p.add_argument("--ukf", action="store_true", help="life model: UKF posterior instead of the exact grid")
     p.add_argument("--obs-model", default=None, help="observation-model JSON (default: the packaged one)")

@@ -117,21 +117,28 @@ def find_actuator_groups(fleet_dir: str | os.PathLike) -> list[tuple[str, list[P
     if dirs:
         return [(p.name, _mission_bags(p)) for p in dirs]
     if not flat:
-        raise FileNotFoundError(f"{d}: no actuator folders with .mcap bags and no bags of its own")
+        raise FileNotFoundError(f"{d}: no .mcap bags (neither actuator folders holding bags nor bags of its own)")
     from hd_bag.mcapio import read_metadata
 
     groups: dict[str, list[Path]] = {}
+    unread: list[tuple[Path, str]] = []
     for b in flat:
         try:
             aid = str(read_metadata(b).get("hd_mission", {}).get("actuator_id", "")).strip()
-        except Exception as e:  # noqa: BLE001 - any unreadable bag is named, not a traceback
-            raise ValueError(f"{b}: cannot read its hd_mission metadata to group the flat fleet folder by "
-                             f"actuator ({e})") from None
+        except Exception as e:  # noqa: BLE001 - any unreadable bag is named, never a traceback
+            unread.append((b, f"{type(e).__name__}: {e}"))
+            continue
         if not aid:
-            raise ValueError(f"{b}: no actuator_id in its hd_mission metadata: cannot group the flat fleet folder")
+            unread.append((b, "no actuator_id in its hd_mission metadata"))
+            continue
         groups.setdefault(aid, []).append(b)
-    print(f"note: {d}: bags grouped by their metadata's actuator_id ({len(groups)} actuators, no actuator folders)",
-          file=sys.stderr)
+    if len(groups) <= 1:
+        # one actuator's folder: a bag without readable metadata stays with it, and the reader skips it with a note
+        return [(next(iter(groups), d.name), flat)]
+    print(f"note: {d}: bags grouped by their metadata's actuator_id ({len(groups)} actuators, no actuator "
+          "folders)", file=sys.stderr)
+    for b, why in unread:  # whose it is cannot be told: not used, said so
+        print(f"warning: skipping {b}: cannot tell its actuator ({why})", file=sys.stderr)
     return sorted(groups.items())
 
 
@@ -174,7 +181,8 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
         if aid is None:
             aid = m.meta.actuator_id
         elif m.meta.actuator_id != aid:
-            raise ValueError(f"{b}: actuator_id {m.meta.actuator_id!r} differs from {aid!r} in the same folder")
+            raise ValueError(f"{b}: actuator_id {m.meta.actuator_id!r} differs from {aid!r} in the same folder (one "
+                             "actuator per folder; 'hdphm prognose --unit ID' picks one from a folder of several)")
         try:
             f = mission_observation_features(m)
         except ValueError as e:

@@ -301,3 +301,28 @@ def test_a_flat_fleet_folder_is_grouped_by_actuator_id(tmp_path, capsys):
     shutil.copy(tmp_path / "flat" / "FX-A_m0.mcap", tmp_path / "tree" / "stray.mcap")
     with pytest.raises(ValueError, match="one layout per fleet folder"):
         find_actuator_groups(tmp_path / "tree")
+
+
+def test_prognose_picks_one_actuator_of_a_flat_fleet_folder(tmp_path, capsys):
+    """`hdphm prognose FLAT_DIR --unit ID` reads that actuator's bags only (the same history as its own folder);
+    without --unit the mixed folder is refused with the hint, an unknown unit is named with the ones present."""
+    import shutil
+
+    plain = FB.replace(FB.VARIANTS["plain"], sim={"duration": 1.5})
+    for aid in ("FX-A", "FX-B"):
+        for k in range(3):
+            FB.write_variant(tmp_path / "tree" / aid, FB.replace(plain, name=f"{aid}_m{k}"), seed=k + 7 * len(aid),
+                             mission_index=k, operating_hours=10.0 * k, actuator_id=aid)
+    (tmp_path / "flat").mkdir()
+    for b in sorted((tmp_path / "tree").rglob("*.mcap")):
+        shutil.copy(b, tmp_path / "flat" / b.name)
+    args = ["--no-plots", "--particles", "300"]
+    assert main(["prognose", str(tmp_path / "flat"), "--unit", "FX-B", "--out", str(tmp_path / "pf")] + args) == 0
+    assert main(["prognose", str(tmp_path / "tree" / "FX-B"), "--out", str(tmp_path / "pt")] + args) == 0
+    a, b = (json.loads((tmp_path / p / "rul_history.json").read_text()) for p in ("pf", "pt"))
+    assert a["t"] == b["t"] == [0.0, 1.0, 2.0] and a["rul_quantiles"] == b["rul_quantiles"]
+    capsys.readouterr()
+    assert main(["prognose", str(tmp_path / "flat"), "--out", str(tmp_path / "px")] + args) != 0
+    assert "--unit ID" in capsys.readouterr().err
+    assert main(["prognose", str(tmp_path / "flat"), "--unit", "FX-C", "--out", str(tmp_path / "px")] + args) != 0
+    assert "no actuator 'FX-C' (it holds FX-A, FX-B)" in capsys.readouterr().err
