@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -261,7 +262,8 @@ def _virkler(args) -> int:
 def _life_sources(src: str, events: str | None, feature: str, exposure: str, cache=None, workers: int = 1,
                   progress: bool = False):
     """SOURCE (fleet folder of actuator folders, or a ``unit,time,hi[,exposure]`` CSV) + events ->
-    ({exposure name: [UnitHistory]}, feature name, time unit, notes). Contract topics only."""
+    ({exposure name: [UnitHistory]}, feature name, time unit, notes, gear ratios of the bags or None). Contract
+    topics only."""
     from hd_prognostic.lifemodel import EXPOSURES, attach_events, read_events, read_hi_csv
 
     ev = read_events(events) if events else {}
@@ -271,7 +273,7 @@ def _life_sources(src: str, events: str | None, feature: str, exposure: str, cac
         units = read_hi_csv(p)
         notes += attach_events(units, ev, str(events))
         name = "csv exposure" if exposure in ("auto", "csv") else exposure
-        return {name: units}, "hi", "step", notes
+        return {name: units}, "hi", "step", notes, None
     from hd_prognostic.pipeline import load_fleet_histories, unit_history
 
     names = list(EXPOSURES) if exposure == "auto" else [exposure]
@@ -287,19 +289,25 @@ def _life_sources(src: str, events: str | None, feature: str, exposure: str, cac
             continue
         notes += attach_events(units, ev, str(events))
         out[n] = units
-    return out, feature, "mission", notes
+    Ns = sorted({float(v) for a in acts for v in a.feature("gear_ratio") if math.isfinite(v)})
+    if len(Ns) > 1:
+        notes.append(f"{p}: the fleet mixes gear ratios {', '.join(f'{v:g}' for v in Ns)}: one life model is fitted "
+                     "to all of them (the health indicator's scale may differ by transmission type)")
+    return out, feature, "mission", notes, Ns
 
 
 def _fit_life(args) -> int:
     from hd_prognostic.lifemodel import fit_best
 
-    cands, feature, tu, notes = _life_sources(args.source, args.events, args.feature, args.exposure,
-                                              cache=args.cache, workers=args.workers, progress=True)
+    cands, feature, tu, notes, Ns = _life_sources(args.source, args.events, args.feature, args.exposure,
+                                                  cache=args.cache, workers=args.workers, progress=True)
     for n in dict.fromkeys(notes):
         print(f"note: {n}", file=sys.stderr)
     m = fit_best(cands, feature=feature, time_unit=tu, progress=True, n_draws=args.draws, threshold=args.threshold,
                  failure_level=args.failure_level, path=args.path, failure_at=args.failure_at, noise=args.noise,
                  exposure_spread=args.exposure_spread, hi_gain=args.hi_gain)
+    if Ns:
+        m.fit_info["gear_ratio"] = Ns  # transmission types the fit has seen (prognose notes another)
     m.to_json(args.out)
     fi = m.fit_info
     print(json.dumps({"exposure": m.exposure, "E_ref": m.E_ref, **m.to_json()["readable"],
@@ -344,6 +352,14 @@ def _prognose_life(args) -> int:
             raise ValueError(f"{args.model}: fitted on CSV exposure ({model.exposure}); give a CSV file")
         a = _one_actuator(args)
         u = unit_history(a, model.feature, model.exposure)
+        Ns_fit = model.fit_info.get("gear_ratio")
+        Ns_own = sorted({float(v) for v in a.feature("gear_ratio") if math.isfinite(v)})
+        if Ns_fit and Ns_own and any(min(abs(n / f - 1.0) for f in Ns_fit) > 0.01 for n in Ns_own):
+            msg = (f"{a.actuator_id}: gear ratio {', '.join(f'{v:g}' for v in Ns_own)}, the life model was fitted on "
+                   f"{', '.join(f'{v:g}' for v in Ns_fit)}: another transmission type, whose health indicator may "
+                   "scale differently")
+            u.notes.append(msg)
+            print(f"note: {msg}", file=sys.stderr)
     notes = attach_events([u], {k: v for k, v in ev.items() if k == u.unit}, str(args.events))
     if u.events.failure is not None:  # prognosis of a failed unit: its record before the failure only
         notes.append(f"{u.unit}: failure at {u.events.failure:g} in the events; RUL shown up to it")

@@ -326,3 +326,23 @@ def test_prognose_picks_one_actuator_of_a_flat_fleet_folder(tmp_path, capsys):
     assert "--unit ID" in capsys.readouterr().err
     assert main(["prognose", str(tmp_path / "flat"), "--unit", "FX-C", "--out", str(tmp_path / "px")] + args) != 0
     assert "no actuator 'FX-C' (it holds FX-A, FX-B)" in capsys.readouterr().err
+
+
+def test_life_model_prognose_notes_another_transmission_type(tmp_path, capsys):
+    """A life model fitted from N = 101 bags records its gear ratios; an N = 50 actuator's prognosis says so."""
+    from hd_prognostic.lifemodel import LifeModel
+    from tests.prognostic.lifesynth import synth_units
+
+    m = LifeModel.fit(synth_units(8, seed=1, censor_frac=0.2)[0], exposure="missions", feature="HF_MTW_IF",
+                      time_unit="mission", n_draws=0)
+    m.fit_info["gear_ratio"] = [101.0]  # what `hdphm prognostic fit` writes for a fleet of N = 101 bags
+    m.to_json(tmp_path / "m.json")
+    v = FB.replace(FB.VARIANTS["n50"], sim={"gear_ratio": 50, "k_t": 0.35, "duration": 3.0})
+    for k in range(3):
+        FB.write_variant(tmp_path / "n50", FB.replace(v, name=f"m{k}"), seed=k, mission_index=k,
+                         actuator_id="FX-N50")
+    assert main(["prognose", str(tmp_path / "n50"), "--model", str(tmp_path / "m.json"), "--out",
+                 str(tmp_path / "p"), "--no-plots"]) == 0
+    h = json.loads((tmp_path / "p" / "rul_history.json").read_text())
+    assert any("gear ratio 50, the life model was fitted on 101" in s for s in h["meta"]["notes"])
+    assert "another transmission type" in capsys.readouterr().err
