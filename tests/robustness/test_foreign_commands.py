@@ -346,3 +346,18 @@ def test_life_model_prognose_notes_another_transmission_type(tmp_path, capsys):
     h = json.loads((tmp_path / "p" / "rul_history.json").read_text())
     assert any("gear ratio 50, the life model was fitted on 101" in s for s in h["meta"]["notes"])
     assert "another transmission type" in capsys.readouterr().err
+
+
+def test_life_model_fit_notes_a_fleet_mixing_gear_ratios(tmp_path):
+    """`hdphm prognostic fit` on bags of two transmission types: the fleet's gear ratios are returned for the model's
+    fit_info and a note says one life model is fitted to both."""
+    from hd_prognostic.cli import _life_sources
+
+    for aid, var, sim in (("FX-A", "plain", {}), ("FX-B", "n50", {"gear_ratio": 50, "k_t": 0.35})):
+        v = FB.replace(FB.VARIANTS[var], sim={**sim, "duration": 3.0})
+        for k in range(3):
+            FB.write_variant(tmp_path / "fleet" / aid, FB.replace(v, name=f"m{k}"), seed=k, mission_index=k,
+                             actuator_id=aid)
+    cands, feature, tu, notes, Ns = _life_sources(str(tmp_path / "fleet"), None, "HF_MTW_IF", "missions")
+    assert Ns == [50.0, 101.0] and [u.unit for u in cands["missions"]] == ["FX-A", "FX-B"]
+    assert any("mixes gear ratios 50, 101" in s for s in notes)
