@@ -292,6 +292,17 @@ def attach_events(units: list[UnitHistory], events: dict[str, UnitEvents], sourc
     notes = []
     ids = {u.unit for u in units}
     extra = sorted(set(events) - ids)
+    # ids that differ only in case (a spreadsheet that upper-cased them): the same unit when the match is unique
+    by_fold: dict[str, list[str]] = {}
+    for i in ids:
+        by_fold.setdefault(i.casefold(), []).append(i)
+    events = dict(events)
+    for e in list(extra):
+        hit = by_fold.get(e.casefold(), [])
+        if len(hit) == 1 and hit[0] not in events:
+            events[hit[0]] = events.pop(e)
+            extra.remove(e)
+            notes.append(f"{source}: unit {e!r} taken as {hit[0]!r} (the ids differ only in case)")
     if extra:
         notes.append(f"{source}: {len(extra)} unit(s) with events but no health-indicator history ignored: "
                      f"{', '.join(extra[:5])}")

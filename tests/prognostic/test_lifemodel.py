@@ -127,6 +127,16 @@ def test_spreadsheet_exports_read_the_same(tmp_path):
         read_hi_csv(tmp_path / "bad.csv")
 
 
+def test_event_ids_that_differ_only_in_case_are_the_same_unit():
+    units, _ = synth_units(3, seed=9, censor_frac=0.0)
+    ids = [u.unit for u in units]
+    ev = {ids[0].lower(): UnitEvents(failure=float(units[0].t[-1]) + 1.0), "nobody": UnitEvents(failure=3.0)}
+    notes = attach_events(units, ev, "ev.csv")
+    assert units[0].events.failure == float(units[0].t[-1]) + 1.0
+    assert ids[0] != ids[0].lower() and any(f"taken as {ids[0]!r}" in n for n in notes)
+    assert any("nobody" in n for n in notes)  # no unit of that name in any case: still ignored, said so
+
+
 def test_events_roundtrip_and_docs_example(tmp_path):
     from pathlib import Path
 
