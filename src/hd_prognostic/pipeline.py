@@ -104,8 +104,9 @@ def find_bags(bag_dir: str | os.PathLike) -> list[Path]:
 def find_actuator_groups(fleet_dir: str | os.PathLike) -> list[tuple[str, list[Path]]]:
     """Each actuator's (name, bags) in a fleet folder: one sub-folder per actuator (the layout ``hdphm sim fleet``
     writes; the name is the folder's), or, where the folder holds the bags themselves (another tool's flat layout),
-    its bags grouped by the ``actuator_id`` of their metadata (a bag whose metadata cannot be read is named in the
-    error)."""
+    its bags grouped by the ``actuator_id`` of their metadata. A bag whose metadata cannot be read stays with the
+    folder's one actuator (its reader skips it with a note); among several actuators it is skipped with a warning
+    (whose it is cannot be told)."""
     d = Path(fleet_dir)
     if not d.is_dir():
         raise FileNotFoundError(f"{d}: not a directory")
@@ -204,7 +205,7 @@ def extract_actuator(bag_dir: str | os.PathLike, *, include_truth: bool = False,
                     [r["mission_index"] for r in rows]))
     rows = [rows[i] for i in o]
     ident = [ident[i] for i in o]
-    # the same recording twice (a copied bag: same mission_index, first stamp and length): one is kept, said so
+    # the same recording twice (a copied bag: same mission_index and samples, _recording_digest): one kept, said so
     seen: dict[tuple, str] = {}
     keep = []
     for j, (r, idn) in enumerate(zip(rows, ident)):

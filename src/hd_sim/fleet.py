@@ -160,7 +160,7 @@ def _mission_refining(params, effects, prof, mseed, *, fs: float, n_sub: int | N
     tried = []
     for k in range(REFINE_STEPS + 1):
         ns = base * 2**k
-        if ns > 1000:
+        if k and ns > 1000:  # simulate_mission's own limit on the step count
             break
         try:
             mission, truth = simulate_mission(params, effects, prof, mseed, fs=fs, n_sub=n_sub if k == 0 else ns,
