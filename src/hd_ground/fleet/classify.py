@@ -19,7 +19,8 @@ structures (``covariance``): the pooled within-class covariance (``pooled``, lin
 diagonal (``diagonal``), or per class (``class``, quadratic discriminant) shrunk toward the pooled one as a
 conjugate prior with ``nu = d + 2`` pseudo-observations, ``S_c = (n_c S_c_hat + nu S_pool) / (n_c + nu)``, so small
 classes stay well-conditioned; :func:`fit_across_plants` chooses the structure by leave-one-plant-out
-cross-validation when the training data come from several plant types; equal class priors (a fleet's fault mix is not the training fleet's). Missing
+cross-validation when the training data come from several plant types. Equal class priors (a fleet's fault mix is
+not the training fleet's). Missing
 inputs (a monitor that could not evaluate) are marginalised: the Gaussian of the observed coordinates.
 **Unknown** is a broad background class: a Gaussian centred on the training mean with ``background_scale``^2
 times the total training covariance and prior ``background_prior``; a point unlikely under every fault
@@ -99,7 +100,8 @@ def _logpdf(x: np.ndarray, mu: np.ndarray, S: np.ndarray) -> tuple[float, float]
 
 
 class GaussianFaultClassifier:
-    """Regularised QDA with a broad background ("unknown") class (see the module docstring)."""
+    """Gaussian class densities (pooled, diagonal or per-class covariance) with a broad background ("unknown") class
+    (see the module docstring)."""
 
     def __init__(self, background_scale: float = 3.0, background_prior: float = 0.02, covariance: str = "pooled"):
         if covariance not in COVARIANCES:
@@ -243,7 +245,8 @@ def fit_across_plants(X: np.ndarray, y: Sequence[str], plants: Sequence[str],
     m = GaussianFaultClassifier(covariance=best, **kw).fit(X, y)
     m.info["covariance_choice"] = ({"rule": "leave-one-plant-out macro recall", "plants": names, "chosen": best,
                                     "mean_macro_recall": mean, "per_plant": scores}
-                                   if ok else {"rule": f"one plant only ({', '.join(names)}): {best}, not chosen"})
+                                   if ok else {"rule": f"no plant could be held out ({', '.join(names)}: one plant, "
+                                                       f"or the others alone cannot be fitted): {best}, not chosen"})
     return m
 
 
