@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -274,7 +273,7 @@ def _life_sources(src: str, events: str | None, feature: str, exposure: str, cac
         notes += attach_events(units, ev, str(events))
         name = "csv exposure" if exposure in ("auto", "csv") else exposure
         return {name: units}, "hi", "step", notes, None
-    from hd_prognostic.pipeline import load_fleet_histories, unit_history
+    from hd_prognostic.pipeline import gear_ratios, load_fleet_histories, unit_history
 
     names = list(EXPOSURES) if exposure == "auto" else [exposure]
     acts, _ = load_fleet_histories(p, feature, "missions", cache_dir=cache, workers=workers, progress=progress)
@@ -289,7 +288,7 @@ def _life_sources(src: str, events: str | None, feature: str, exposure: str, cac
             continue
         notes += attach_events(units, ev, str(events))
         out[n] = units
-    Ns = sorted({float(v) for a in acts for v in a.feature("gear_ratio") if math.isfinite(v)})
+    Ns = gear_ratios(acts)
     if len(Ns) > 1:
         notes.append(f"{p}: the fleet mixes gear ratios {', '.join(f'{v:g}' for v in Ns)}: one life model is fitted "
                      "to all of them (the health indicator's scale may differ by transmission type)")
@@ -346,15 +345,15 @@ def _prognose_life(args) -> int:
             raise ValueError(f"{src}: {len(units)} units in the file; choose one with --unit")
         u = units[0]
     else:
-        from hd_prognostic.pipeline import unit_history
+        from hd_prognostic.pipeline import other_transmission, unit_history
 
         if model.exposure not in ("missions", "hours", "load"):
             raise ValueError(f"{args.model}: fitted on CSV exposure ({model.exposure}); give a CSV file")
         a = _one_actuator(args)
         u = unit_history(a, model.feature, model.exposure)
         Ns_fit = model.fit_info.get("gear_ratio")
-        Ns_own = sorted({float(v) for v in a.feature("gear_ratio") if math.isfinite(v)})
-        if Ns_fit and Ns_own and any(min(abs(n / f - 1.0) for f in Ns_fit) > 0.01 for n in Ns_own):
+        Ns_own = other_transmission(a, Ns_fit)
+        if Ns_own:
             msg = (f"{a.actuator_id}: gear ratio {', '.join(f'{v:g}' for v in Ns_own)}, the life model was fitted on "
                    f"{', '.join(f'{v:g}' for v in Ns_fit)}: another transmission type, whose health indicator may "
                    "scale differently")

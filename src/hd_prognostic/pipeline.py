@@ -343,10 +343,25 @@ def fit_population(train: list[ActuatorData], feature: str = "HF_MTW_IF", degree
         "predictive_prior": bool(predictive_prior),
     }
     obs.degradation["sigma_log_kappa"] = (obs.degradation["sigma_log_kappa_fit"] if kappa_lifetime else 0.02)
-    Ns = sorted({float(v) for a in train for v in a.feature("gear_ratio") if np.isfinite(v)})
+    Ns = gear_ratios(train)
     if Ns:
         obs.fit_info["gear_ratio"] = Ns  # transmission types the fit has seen (prognose notes others)
     return obs
+
+
+def gear_ratios(acts: list[ActuatorData]) -> list[float]:
+    """The transmission types (metadata gear ratios N) of the actuators' bags, sorted: what a fitted model records
+    in ``fit_info["gear_ratio"]`` so that a prognosis can name an actuator of another type."""
+    return sorted({float(v) for a in acts for v in a.feature("gear_ratio") if np.isfinite(v)})
+
+
+def other_transmission(a: ActuatorData, fitted: list[float] | None) -> list[float] | None:
+    """The actuator's gear ratios when one of them is not among those a model was ``fitted`` on (None: same type,
+    or either side unknown)."""
+    own = gear_ratios([a])
+    if fitted and own and any(min(abs(n - f) for f in fitted) > 1e-6 * n for n in own):
+        return own
+    return None
 
 
 def build_model(obs: ObservationModel, h_fail: float | None = None, sigma_log_kappa: float | None = None,
@@ -464,8 +479,8 @@ def prognose(a: ActuatorData, obs: ObservationModel, *, n_particles: int = 2000,
                          " the RUL counts population-sized missions until 3 missions are seen, then this "
                          "actuator's own, so expect a step in the RUL there")
     Ns_fit = obs.fit_info.get("gear_ratio")
-    Ns_own = sorted({float(v) for v in a.feature("gear_ratio") if np.isfinite(v)})
-    if Ns_fit and Ns_own and any(min(abs(n - f) for f in Ns_fit) > 1e-6 * n for n in Ns_own):
+    Ns_own = other_transmission(a, Ns_fit)
+    if Ns_own:
         notes.append(f"gear ratio N = {Ns_own} differs from the N = {Ns_fit} the observation model was fitted on: "
                      "the feature-to-wear map and the wear prior belong to another transmission; refit it on this "
                      "type ('hdphm prognostic fit-obs') before trusting the RUL")
