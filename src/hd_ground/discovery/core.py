@@ -894,6 +894,7 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         cur = e
     # backward: drop groups that no longer earn their place
     changed = True
+    reshaped: set[int] = set()  # shaped groups already re-identified before an identification drop
     while changed and selected:
         changed = False
         for gi in list(selected):
@@ -916,6 +917,23 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
               gi)
              for gi in selected]
         zmin, gi = min(z)
+        if zmin < 1.0 and groups[gi][0].shapes and reshape is not None and gi not in reshaped:
+            # a shaped group is judged at its shape given this model (variable projection): its shape was identified
+            # when it entered, beside the groups before it; the groups after it may have taken what that shape read
+            # (a narrow dead zone standing in for part of a hardening law the cubic term then reads). Its shape is
+            # identified again given all the others, and the group is asked again at that shape (once); whether the
+            # new shape itself is identified is asked by the final-shape check, as for every shaped group
+            reshaped.add(gi)
+            w_old = zmin * _wald_threshold(len(_tcols(groups, gi)), opt.wald_sigmas)
+            if reshape(gi, _model(base_idx, groups, [gj for gj in selected if gj != gi])):
+                e = gram.cv_sse(idx)
+                trace.append({"step": "reshape (unidentified)", "candidate": _label(groups, gi), "wald_before": float(w_old),
+                              "wald": float(gram.jackknife_wald(idx, _tcols(groups, gi))),
+                              "change": float((e.sum() - cur.sum()) / cur.sum()),
+                              "shape": {k: float(v) for k, v in groups[gi][0].nonlinear.items() if not k.endswith("_sd")}})
+                cur = e
+                changed = True
+                continue
         if zmin < 1.0:
             selected.remove(gi)
             rest = _model(base_idx, groups, selected)
