@@ -67,3 +67,18 @@ def test_torsion_law_degree_is_chosen_by_cross_validation(k5):
         p5 = next(e["parameters"]["k5"] for e in stiff if "k5" in e["parameters"])
         assert p5 == pytest.approx(k5, rel=0.15)
     assert r.error_after["rmse"] < 3.3, r.error_after
+
+
+@pytest.mark.parametrize("k2", [0.0, 6.0e7])
+def test_torsion_law_quadratic_odd_term_is_chosen_by_cross_validation(k2):
+    """k2 w |w| (a local stiffness K + 2 k2 |w| that grows linearly with the twist: the smooth reading of the
+    catalogue's three-slope law, PHYSICS.md 2.1) competes as a refinement of the cubic law; the data decide."""
+    ds, ho = torsion_plant(lambda x: K * x + k2 * x * np.abs(x) + K3 * x**3, seed=2)
+    r = discover_signal(ds, "Q_red", ho)
+    stiff = [e for e in r.effects if e["name"] == "nonlinear_stiffness"]
+    assert any("k3" in e["parameters"] for e in stiff), r.cv_trace
+    p2 = [e["parameters"]["k2"] for e in stiff if "k2" in e["parameters"]]
+    if k2 == 0.0:
+        assert not p2, r.cv_trace  # a cubic law gets no quadratic term
+    else:
+        assert p2 and p2[0] == pytest.approx(k2, rel=0.2), (p2, r.cv_trace)

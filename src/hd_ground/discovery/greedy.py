@@ -56,6 +56,7 @@ def _groups(sig: dict, target: str, eps: float, avail: set[str]) -> list[tuple[s
     elif "windup" in avail:
         wu = sig["windup"]
         g.append(("nonlinear_stiffness", "windup", None, [wu**3]))
+        g.append(("nonlinear_stiffness", "windup", None, [wu * np.abs(wu)]))  # the same kinds of terms as discover's
         sc = float(np.quantile(np.abs(wu), 0.9))
         for j in np.geomspace(0.02, 0.3, 4) * sc:
             dz = np.sign(wu) * np.maximum(np.abs(wu) - j, 0.0)

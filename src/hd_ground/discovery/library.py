@@ -408,6 +408,14 @@ def transmission_candidates(ctx: LibraryContext) -> list[Candidate]:
         Candidate("nonlinear_stiffness", "stiffness", "windup", None,
                   [{"op": "pow", "var": "windup", "p": 3.0}], "k3 w^3, w = theta_m/N - theta_f",
                   lambda c: {"k3": float(c[0])}, requires=("windup",)),
+        # the law's quadratic odd term, a refinement of the cubic: a local stiffness K + 2 k2 |w| that grows linearly
+        # with the twist (the smooth reading of the catalogue's three-slope law, PHYSICS.md 2.1, whose stiffness
+        # rises with load from zero twist; the cubic's K + 3 k3 w^2 rises quadratically). A measured law is an odd
+        # function of unknown form: w, w |w|, w^3, w^5 are its odd series in |w|, and selection decides (CV, Wald)
+        Candidate("nonlinear_stiffness", "stiffness:2", "windup", None,
+                  [{"op": "prod", "factors": [{"op": "var", "var": "windup"}, {"op": "abs", "var": "windup"}]}],
+                  "k2 w |w| (quadratic odd term of the torsion law after k3 w^3), w = theta_m/N - theta_f",
+                  lambda c: {"k2": float(c[0])}, requires=("windup",), after="stiffness"),
         Candidate("unknown", "bias", None, None, [{"op": "const"}], "c_0", lambda c: {"c_0": float(c[0])}),
     ]
 
