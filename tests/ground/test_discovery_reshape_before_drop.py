@@ -18,10 +18,11 @@ with the rule (README, discovery section), and it fired on no other. Since the t
 k2 w |w| term) this case takes another path to the same end (the dead zone left out at its lower width bound), so
 the test runs with the catalog the rule was found with.
 
-~40 s (bags 10 s, discover and greedy 30 s).
+~20 s (bags 10 s, discover and greedy 10 s).
 """
 
 import importlib.util
+import json
 from pathlib import Path
 
 _BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_discover.py"
@@ -42,8 +43,6 @@ def test_a_dead_zone_unidentified_beside_the_cubic_law_is_reshaped_then_left_out
     params, exp1 = bd.FAMILY_EFFECTS[effect]
     bags = bd.make_family_bags(tmp_path / "bags", "smooth-cubic", effect, params, duration=4.0, seed=9100)
     row = bd.evaluate_world_case("smooth-cubic", effect, bags, (exp1,), None, tmp_path / "out", signals=["Q_red"])
-    import json
-
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     q = next(s for s in rep["signals"] if s["signal"] == "Q_red")
     steps = [r for r in q["selection_trace"] if r["step"] == "reshape (unidentified)"]
