@@ -897,6 +897,18 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
     reshaped: set[int] = set()  # shaped groups already re-identified before an identification drop
     while changed and selected:
         changed = False
+        fams_sel = {groups[g][0].family for g in selected}
+        orphan = next((g for g in selected if getattr(groups[g][0], "beside", None)
+                       and groups[g][0].beside not in fams_sel), None)
+        if orphan is not None:
+            # a part of an effect whose other part is not in the model (Candidate.beside): no reading of it
+            selected.remove(orphan)
+            e = gram.cv_sse(_model(base_idx, groups, selected))
+            trace.append({"step": "drop (without its partner)", "candidate": _label(groups, orphan),
+                          "partner": groups[orphan][0].beside, "loss": float((e.sum() - cur.sum()) / cur.sum())})
+            cur = e
+            changed = True
+            continue
         for gi in list(selected):
             idx = _model(base_idx, groups, [gj for gj in selected if gj != gi])
             e = gram.cv_sse(idx)

@@ -60,6 +60,9 @@ class Candidate:
     nuisance: tuple[str, ...] = ()  # shapes re-identified with the group whose identification does not decide
     replaces: tuple[str, ...] = ()  # baseline parameters whose columns the group replaces (e.g. "T_C")
     after: str | None = None  # a refinement: competes only once this family is selected (e.g. the next order)
+    # a part of an effect that needs this family beside it in the final model (it may enter first, where it is the
+    # larger part, but a model that keeps it without that family is no reading of the effect: the backward pass drops it)
+    beside: str | None = None
     # (family, column): competes only while that family is selected with a positive coefficient on that column of its
     # group in the current model (a premise of the reading, e.g. a lost motion: the spring engages outside its width)
     needs_positive: tuple[str, int] | None = None
@@ -345,17 +348,18 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                 # inside the spring gives Q = f(w - e) ~ f(w) - f'(w) e, and with f = K w + k3 w^3 the
                 # f'(w) e part is K e (the plain ripple) plus 3 k3 w^2 e (this group, in its own family so
                 # that it can join the plain ripple); the data decide (CV + Wald) whether the law is curved.
-                # A refinement of the plain ripple (``after``): the K e part comes with every w^2 e part, since K > 0
-                # is the law's slope at zero twist, so a w^2 ripple with no ripple of its order beside it is no
-                # reading of this effect (on clean hysteretic-robot data, seed 12700, one entered alone at the
-                # Wald rule's knife edge and was named as a kinematic error the plant does not have)
+                # The K e part comes with every w^2 e part, since K > 0 is the law's slope at zero twist, so a final
+                # model with a w^2 ripple and no plain ripple of its order is no reading of this effect (``beside``;
+                # on clean hysteretic-robot data, seed 12700, one entered alone at the Wald rule's knife edge and
+                # was named as a kinematic error the plant does not have). It may enter first: on a strongly curved
+                # law the w^2 part is the larger one, and the plain ripple joins it after
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, "plain"), f"{fam}:stiff", var, float(k),
                     pair(k, {"op": "pow", "var": "windup", "p": 2.0}),
                     f"K b_{ks} w^2 sin({ks} {var} + psi_{ks}), w = theta_m/N - theta_f (the ripple through the "
                     "torsion law's local stiffness)" + at,
                     _harm_params("K_b", k), requires=(var, "windup"),
-                    level_carrier={"op": "pow", "var": "windup", "p": 2.0}, after=fam,
+                    level_carrier={"op": "pow", "var": "windup", "p": 2.0}, beside=fam,
                 ))
                 if ctx.windup_scale > 0:
                     out.append(_contact_ripple(ctx, var, k, fam, pair, at))
