@@ -1,4 +1,4 @@
-"""The kinematic error's w^2 ripple is a refinement of the plain ripple of its order (issue 10, clean data).
+"""The kinematic error's w^2 ripple is kept only beside the plain ripple of its order (issue 10, clean data).
 
 A position error e(theta) inside a hardening torsion law f gives Q = f(w - e) ~ f(w) - f'(w) e, and with
 f = K w + k3 w^3 the f'(w) e part is K e (the plain ripple) plus 3 k3 w^2 e (the ``:stiff`` group). K > 0 is the law's

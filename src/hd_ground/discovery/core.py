@@ -1137,10 +1137,10 @@ def heldout_coverage(x_fit: np.ndarray, x_held: np.ndarray, min_share: float = 0
         return 0.0, float("nan"), float("nan")
     bins, counts = np.unique(kf, return_counts=True)
     share = dict(zip(bins.tolist(), (counts / kf.size).tolist()))
-    sh = np.array([share.get(k, 0.0) for k in kh.tolist()])
+    covered = bins[counts / kf.size >= min_share]
     med = float(np.median(ah))
     k_med = float(np.floor(np.log2(med))) if med > 0 else -np.inf
-    return float(np.mean(sh < min_share)), med, float(share.get(k_med, 0.0))
+    return float(np.mean(~np.isin(kh, covered))), med, float(share.get(k_med, 0.0))
 
 
 def _err(r: np.ndarray, y: np.ndarray) -> dict:
