@@ -32,6 +32,13 @@ from hd_twin.terms import harmonic_amplitude_phase, make_term, sin_cos_pair
 STATE_PREFIX = "presliding:"
 
 
+def measured_signal(var: str) -> str:
+    """The logged signal a column is computed from: ``var`` itself, or the angle / twist under a pre-sliding state
+    column (``presliding:theta_m:...`` -> ``theta_m``). A candidate requires the signal, never the derived column:
+    the state is made by discovery, so it is in no bag's list of available signals."""
+    return var.split(":")[1] if var.startswith(STATE_PREFIX) else var
+
+
 def state_var(var: str, distance: float) -> str:
     """Column name of the pre-sliding state of ``var`` at ``distance`` (same unit as ``var``)."""
     return f"{STATE_PREFIX}{var}:{float(distance)!r}"
@@ -328,7 +335,7 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                 out.append(Candidate(
                     _periodic_name(ctx.target, var, k, variant), fam, var, float(k),
                     pair(k, times), form + at, _harm_params(pname, k),
-                    requires=tuple({var} | ({times["var"]} if times and "var" in times else set())
+                    requires=tuple({var} | ({measured_signal(times["var"])} if times and "var" in times else set())
                                    | ({rate} if skew else set())),
                     # i_q is the target itself (tau_m / k_t): a level of it per block would rescale the target, no
                     # nuisance that can be fitted, so the i_q variant is not tested (its ripple scales with the current)
