@@ -277,7 +277,9 @@ FAMILY_EFFECTS = {
     "load_dependent_friction": ({}, ("tau_m", "load_dependent_friction", "Q_red", None)),
     "temperature_dependent_friction": ({}, ("tau_m", "temperature_dependent_friction", "temperature", None)),
     "position_dependent_stiffness": ({}, ("Q_red", "position_dependent_stiffness", "theta_m", 2.0)),
-    "backlash": ({}, ("Q_red", "backlash", "windup", None)),
+    # j = j0 + the wear gap: a new unit's wear gap is 0, so without j0 there is no dead zone to find (hd_sim's
+    # default); 2.4e-5 m at the mesh radius (0.0825 m by default) is ~1 arcmin of lost motion at the output
+    "backlash": ({"backlash.j0": 2.4e-5}, ("Q_red", "backlash", "windup", None)),
     "hysteresis": ({}, ("Q_red", "hysteresis", "windup", None)),
     "cogging_torque": ({}, ("tau_m", "cogging_torque", "theta_m", None)),
     "current_ripple": ({}, ("tau_m", "current_ripple", "theta_m", None)),
