@@ -48,8 +48,8 @@ from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_
 from hd_twin.terms import basis_matrix, evaluate_terms
 
 from .data import DEFAULT_ALPHA_WINDOW_S, DEFAULT_RETIME_WINDOW_S, Dataset, DiscoveryError, angle_resolution, with_smoothed_twist
-from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, merge_orders,
-                      state_var)
+from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, measured_signal,
+                      merge_orders, state_var)
 from .loopshape import refine_loop_shape, twist_state_of
 from .prefilter import (DERIVATIVE_SIGNALS, SHIFT_RANGE, filtered_design, shift_samples, shifted_state_var,
                         smooth_like_derivative)
@@ -130,7 +130,7 @@ def static_term(term: dict, eps_omega: float | None) -> dict | None:
         v = str(b.get("var", ""))
         if not v.startswith(STATE_PREFIX):
             return copy.deepcopy(b)
-        if v.split(":")[1] == "theta_m" and b.get("op") == "var" and eps_omega and eps_omega > 0:
+        if measured_signal(v) == "theta_m" and b.get("op") == "var" and eps_omega and eps_omega > 0:
             return {"op": "sgn", "var": "omega_m", "eps": float(eps_omega)}
         return None
     basis = [conv(b) for b in term.get("basis", [])]

@@ -31,7 +31,7 @@ import numpy as np
 
 from hd_twin.identify import BW_N_RANGE, BW_PHI_RANGE, Shape, cv_residuals, vp_shape
 
-from .library import STATE_PREFIX, Candidate
+from .library import STATE_PREFIX, Candidate, measured_signal
 
 
 def loop_state_var(var: str, distance: float, n: float, phi: float) -> str:
@@ -46,7 +46,7 @@ def twist_state_of(cand: Candidate) -> str | None:
     v = str(cand.basis[0].get("var", ""))
     if cand.basis[0].get("op") != "var" or not v.startswith(STATE_PREFIX) or len(v.split(":")) != 3:
         return None
-    return v.split(":")[1]
+    return measured_signal(v)
 
 
 def refine_loop_shape(cand: Candidate, design_of, y: np.ndarray, block: np.ndarray, min_gain: float,
