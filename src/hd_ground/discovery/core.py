@@ -784,9 +784,12 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         for gi, (cand, cols) in enumerate(groups):
             if cand.family in fams_used or cand.family in fams_skip \
                     or (getattr(cand, "after", None) and cand.after not in fams_sel) \
-                    or not _premise_holds(gram, cur_idx, groups, selected, getattr(cand, "needs_positive", None)):
+                    or not _premise_holds(gram, cur_idx, groups, selected, getattr(cand, "needs_positive", None)) \
+                    or not _shape_premise_holds(groups, selected, getattr(cand, "needs_shape", None)):
                 continue
             if cand.shapes and reshape is not None and not reshape(gi, cur_idx):
+                continue
+            if not _beyond_holds(groups, selected, gi):
                 continue
             trial = _model(base_idx, groups, selected + [gi])
             if cand.positive and gram.coef(trial)[-1] <= 0:
@@ -910,13 +913,18 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
             changed = True
             continue
         for gi in list(selected):
-            idx = _model(base_idx, groups, [gj for gj in selected if gj != gi])
+            # a group goes with the parts that need it beside them (Candidate.beside): its place is what removing
+            # all of them costs, not what removing it alone would (the parts could not stay without it)
+            gone = [gi] + [g for g in selected if g != gi and getattr(groups[g][0], "beside", None) == groups[gi][0].family]
+            idx = _model(base_idx, groups, [gj for gj in selected if gj not in gone])
             e = gram.cv_sse(idx)
             t = _paired_t(e, cur)  # how many standard errors the group's removal raises the CV error
             if (e.sum() - cur.sum()) / cur.sum() < opt.min_gain / 2 or t < opt.se_rule:
-                selected.remove(gi)
+                for g in gone:
+                    selected.remove(g)
                 trace.append({"step": "drop", "candidate": f"{groups[gi][0].name}[{groups[gi][0].family}]",
-                              "loss": float((e.sum() - cur.sum()) / cur.sum()), "t": t})
+                              "loss": float((e.sum() - cur.sum()) / cur.sum()), "t": t}
+                             | ({"with": [_label(groups, g) for g in gone[1:]]} if len(gone) > 1 else {}))
                 cur = e
                 changed = True
                 break
@@ -929,6 +937,19 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
               gi)
              for gi in selected]
         zmin, gi = min(z)
+        parts = [g for g in selected if getattr(groups[g][0], "beside", None) == groups[gi][0].family and g != gi]
+        if zmin < 1.0 and parts:
+            # the unidentified group is the partner a later part of an effect needs beside it (Candidate.beside): that
+            # part took the partner's identification (a knot of the law read where the lost motion is), and dropping
+            # the partner would orphan it and leave neither. The part goes, the partner is asked again without it
+            g = parts[-1]
+            selected.remove(g)
+            e = gram.cv_sse(_model(base_idx, groups, selected))
+            trace.append({"step": "drop (takes its partner's identification)", "candidate": _label(groups, g),
+                          "partner": _label(groups, gi), "loss": float((e.sum() - cur.sum()) / cur.sum())})
+            cur = e
+            changed = True
+            continue
         if zmin < 1.0 and groups[gi][0].shapes and reshape is not None and gi not in reshaped:
             # a shaped group is judged at its shape given this model (variable projection): its shape was identified
             # when it entered, beside the groups before it; the groups after it may have taken what that shape read
@@ -969,6 +990,37 @@ def _premise_holds(gram: _BlockGram, cur_idx: list[int], groups, selected: list[
         cand, cols = groups[g]
         if cand.family == fam and cols[j] in cur_idx:
             return bool(gram.coef(cur_idx)[cur_idx.index(cols[j])] > 0)
+    return False
+
+
+def _shape_premise_holds(groups, selected: list[int], need: tuple[str, str] | None) -> bool:
+    """A candidate's premise on a shape (``Candidate.needs_shape`` = (family, shape)): that family is selected and its
+    shape is identified above the low end of its search range (for a width, the twist's noise: nothing narrower is a
+    width), by two block-jackknife SDs (``<shape>_sd``, recorded when the group's shape was confirmed). True without
+    a premise."""
+    if need is None:
+        return True
+    fam, name = need
+    for g in selected:
+        cand = groups[g][0]
+        nl = cand.nonlinear
+        if cand.family == fam and name in nl:
+            sd = nl.get(f"{name}_sd", float("inf"))
+            lo = next((s.lo for s in cand.shapes if s.name == name), 0.0)
+            return bool(np.isfinite(sd) and nl[name] - 2.0 * sd > lo)
+    return False
+
+
+def _beyond_holds(groups, selected: list[int], gi: int) -> bool:
+    """``Candidate.beyond`` = (family, its shape, own shape): the group's own shape lies beyond that selected family's
+    shape (a knot of the torsion law beyond the lost motion's width). True without the condition."""
+    need = getattr(groups[gi][0], "beyond", None)
+    if need is None:
+        return True
+    fam, theirs, mine = need
+    for g in selected:
+        if groups[g][0].family == fam and theirs in groups[g][0].nonlinear:
+            return bool(groups[gi][0].nonlinear.get(mine, -np.inf) > groups[g][0].nonlinear[theirs])
     return False
 
 

@@ -73,6 +73,14 @@ class Candidate:
     # (family, column): competes only while that family is selected with a positive coefficient on that column of its
     # group in the current model (a premise of the reading, e.g. a lost motion: the spring engages outside its width)
     needs_positive: tuple[str, int] | None = None
+    # (family, shape): competes only while that family is selected with that shape above the low end of its search
+    # range by two of its block-jackknife SDs (a premise on a width, e.g. a lost motion that is a gap, not a stand-in
+    # for a curved law at the twist's noise level, the low end of its width range)
+    needs_shape: tuple[str, str] | None = None
+    # (family, its shape, this group's shape): this group's shape, identified given the current model, lies beyond
+    # that selected family's shape (e.g. a knot of the torsion law beyond the lost motion's width); else it does not
+    # compete at that step
+    beyond: tuple[str, str, str] | None = None
     # a function of a position (an angle) times this factor ({"op": "const"} for none): the group must also lower
     # the CV error with a level of the factor per block as a nuisance (core.within_block_sse), i.e. by the angle's
     # motion within blocks, not by levels between blocks where the angle stands still (None: not tested)
@@ -451,6 +459,48 @@ def torsion_order_candidates(ctx: LibraryContext) -> list[Candidate]:
                       [{"op": "pow", "var": "windup", "p": 5.0}],
                       "k5 w^5 (next odd order of the torsion law after k3 w^3), w = theta_m/N - theta_f",
                       lambda c: {"k5": float(c[0])}, requires=("windup",), after="stiffness")]
+
+
+@register_candidate_builder
+def torsion_knot_candidates(ctx: LibraryContext) -> list[Candidate]:
+    """Knots of the catalogue's piecewise-linear torsion law: a slope change dK dz(w; u) at an identified twist u.
+
+    The catalogue describes the twist-to-torque curve by slopes K1, K2, K3 between break points (PHYSICS.md 2.1):
+    K w + dK_1 dz(w; u_1) + dK_2 dz(w; u_2), dz(w; u) = sgn(w) max(|w| - u, 0). Beyond a lost motion (a selected
+    dead zone) the spring's own law is that curve of the engaged twist, and a polynomial in the *measured* twist
+    (k3 w^3, k5 w^5) continues it only roughly: the dead zone shifts the curve by j, so its curvature sits at
+    |w| ~ j + u, where powers of w bend from zero. A knot is a refinement: it competes once the lost motion is
+    selected as a gap (its width two SDs above the low end of its range, the twist's noise: a dead zone there stands
+    in for a curved law, whose odd series then reads the curve), lies beyond the gap (u > j: a slope change inside
+    the gap is a soft edge of the dead zone, which a position error moving the edge also makes, not a knot of the
+    spring's law) and needs the lost motion beside it in the final model; u is identified by the CV profile over the twist's range
+    (as the dead zone's own width is) and reported with its uncertainty, dK by the jackknife Wald rule. A second
+    knot competes once the first is selected (the catalogue's third slope). Named ``nonlinear_stiffness``: the
+    law's shape. Without a lost motion the law's odd series (k3 w^3, k2 w |w|, k5 w^5) reads the curve: a knot
+    after the cubic took the quintic's place on a cubic law (smooth-cubic, seed 100: CV gains 0.2495 against
+    0.2487) and extrapolated worse (held-out 3.70 against 3.34), a linear continuation where the law keeps
+    hardening."""
+    if ctx.target != "Q_red" or "windup" not in ctx.available or ctx.windup_scale <= 0:
+        return []
+    w_lo, w_hi = _twist_range(ctx)
+    u0 = float(np.sqrt(w_lo * w_hi))
+
+    def knot_basis(sh):
+        return [{"op": "deadzone", "var": "windup", "width": float(sh["u"])}]
+
+    out = []
+    # (family, the family it refines and needs beside it in the final model, knot index): a knot read beside a lost
+    # motion that the backward pass then drops would be a one-column dead zone named as a stiffness
+    for fam, after, idx in (("stiffness:knot", "backlash", 1), ("stiffness:knot2", "stiffness:knot", 2)):
+        out.append(Candidate(
+            "nonlinear_stiffness", fam, "windup", None, knot_basis({"u": u0}),
+            f"dK_{idx} dz(w; u_{idx}) (a knot of the piecewise-linear torsion law: the slope changes by dK_{idx} "
+            f"beyond |w| = u_{idx}), dz = sgn(w) max(|w| - u, 0), w = theta_m/N - theta_f",
+            lambda c, i=idx: {f"dK_{i}": float(c[0])}, requires=("windup",), after=after, beside=after,
+            needs_shape=("backlash", "j"), beyond=("backlash", "j", "u"),
+            nonlinear={"u": u0}, shapes=[Shape("u", w_lo, w_hi, log=True, n_grid=12)], make_basis=knot_basis,
+        ))
+    return out
 
 
 @register_candidate_builder
