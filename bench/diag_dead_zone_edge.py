@@ -2,7 +2,7 @@
 
 Rebuilds discover's final Q_red model from its report (the baseline K w + c w' + alpha_f and its terms' bases, on
 discover's twist), then swaps its hard lost motion K_j dz(w; j) + k3_j dz(w; j)^3 for the same law of a dead zone
-whose edges are softplus corners of width s (hd_sim's form, ``s [softplus((w - j)/s) - softplus((-w - j)/s)]``),
+whose edges are softplus corners of width s (``hd_twin.terms``' ``deadzone`` op with ``edge``; hd_sim's form),
 searching j around discover's width and s / j on a grid by the fit blocks' leave-one-block-out CV error (the choice
 never sees the held-out bag), and scores the best both ways: the fit blocks' CV (what discover may choose on; its
 admission rule asks for a 2 % CV gain in a majority of the blocks) and the held-out bag's RMSE. Diagnosis only:
@@ -51,12 +51,11 @@ def main(argv: list[str] | None = None) -> int:
     others = [basis_matrix(t["basis"], sig)[:, k] for t in s0["terms"] if t["name"] != "backlash"
               for k in range(len(t["basis"]))]
     j_d = float(gap["parameters"]["j"])
-    w = sig["windup"]
 
-    def soft(j, s):
-        return s * (np.logaddexp(0.0, (w - j) / s) - np.logaddexp(0.0, (-w - j) / s))
+    def soft(j, s):  # hd_twin.terms' dead zone with softplus corners of width s
+        return basis_matrix([{"op": "deadzone", "var": "windup", "width": float(j), "edge": float(s)}], sig)[:, 0]
 
-    hard = np.sign(w) * np.maximum(np.abs(w) - j_d, 0.0)
+    hard = basis_matrix([{"op": "deadzone", "var": "windup", "width": j_d}], sig)[:, 0]
     name = f"discover final (hard dz, j = {j_d:.3g})"
     table.report(name, base + [hard, hard**3] + others)
     best = None

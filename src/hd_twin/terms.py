@@ -46,13 +46,16 @@ spec                                              value
 ``{"op": "exp_decay", "var": v, "v_s": s,         exp(-(abs(v)/s)**delta)
    "delta": d}``
 ``{"op": "deadzone", "var": v, "width": d}``      sgn(v) max(abs(v) - d, 0)   (lost motion of half-width d)
+``{"op": "deadzone", "var": v, "width": d,        s [softplus((v - d)/s) - softplus((-v - d)/s)]: the same lost
+   "edge": s}``                                   motion with softplus corners of width s (teeth that engage over
+                                                  a twist s, a compliant first contact); s -> 0 gives the hard one
 ``{"op": "within", "var": v, "width": d}``        1 where abs(v) < d, 0 where abs(v) > d (1/2 at d): inside that lost
                                                   motion, no contact (1 - the dead zone's slope)
 ``{"op": "prod", "factors": [spec, ...]}``        product of the factors
 ================================================  =============================================
 
 Everything here is pure and array-namespace agnostic: ``xp`` must provide
-``sin, cos, tanh, sign, abs, exp, ones_like``; both ``numpy`` and ``torch`` do.
+``sin, cos, tanh, sign, abs, exp, log1p, ones_like``; both ``numpy`` and ``torch`` do.
 """
 
 from __future__ import annotations
@@ -144,6 +147,8 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
     elif op in ("deadzone", "within"):
         if _finite_number(spec.get("width"), f"{where}: 'width' of {op}") < 0:
             raise ValueError(f"{where}: {op} needs width >= 0, got {spec.get('width')}")
+        if op == "deadzone" and "edge" in spec and _finite_number(spec.get("edge"), f"{where}: 'edge' of deadzone") < 0:
+            raise ValueError(f"{where}: deadzone needs edge >= 0, got {spec.get('edge')}")
     elif op in ("stribeck", "exp_decay"):
         s = _finite_number(spec.get("v_s"), f"{where}: 'v_s' of {op}")
         d = _finite_number(spec.get("delta", 1.0), f"{where}: 'delta' of {op}")
@@ -254,7 +259,10 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
         k, ref = float(spec["k"]), float(spec.get("ref", 0.0))
         return _finite_where_input_is(xp.exp(k * (x - ref)) - 1.0, x, xp, where, f"expm1 with k={k:g}, ref={ref:g}")
     if op == "deadzone":
-        a = xp.abs(x) - float(spec["width"])
+        d, e = float(spec["width"]), float(spec.get("edge", 0.0))
+        if e > 0.0:
+            return e * (_softplus((x - d) / e, xp) - _softplus((-x - d) / e, xp))
+        a = xp.abs(x) - d
         return xp.sign(x) * (a + xp.abs(a)) / 2
     if op == "within":
         return (1.0 - xp.sign(xp.abs(x) - float(spec["width"]))) / 2
@@ -265,6 +273,11 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
             return decay
         return decay * _sgn(x, float(spec.get("eps", 0.0)), xp)
     raise ValueError(f"{where}: unknown basis op {op!r}")  # pragma: no cover (validated)
+
+
+def _softplus(z, xp):
+    """log(1 + exp(z)) without overflow: max(z, 0) + log1p(exp(-|z|))."""
+    return (z + xp.abs(z)) / 2 + xp.log1p(xp.exp(-xp.abs(z)))
 
 
 def _finite_where_input_is(v, x, xp, where: str, what: str):
