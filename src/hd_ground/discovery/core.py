@@ -915,7 +915,7 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         for gi in list(selected):
             # a group goes with the parts that need it beside them (Candidate.beside): its place is what removing
             # all of them costs, not what removing it alone would (the parts could not stay without it)
-            gone = [gi] + [g for g in selected if g != gi and getattr(groups[g][0], "beside", None) == groups[gi][0].family]
+            gone = [gi] + _parts_of(groups, selected, gi)
             idx = _model(base_idx, groups, [gj for gj in selected if gj not in gone])
             e = gram.cv_sse(idx)
             t = _paired_t(e, cur)  # how many standard errors the group's removal raises the CV error
@@ -937,7 +937,7 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
               gi)
              for gi in selected]
         zmin, gi = min(z)
-        parts = [g for g in selected if getattr(groups[g][0], "beside", None) == groups[gi][0].family and g != gi]
+        parts = _parts_of(groups, selected, gi)
         if zmin < 1.0 and parts:
             # the unidentified group is the partner a later part of an effect needs beside it (Candidate.beside): that
             # part took the partner's identification (a knot of the law read where the lost motion is), and dropping
@@ -993,6 +993,17 @@ def _premise_holds(gram: _BlockGram, cur_idx: list[int], groups, selected: list[
     return False
 
 
+def _parts_of(groups, selected: list[int], gi: int) -> list[int]:
+    """The selected groups that need group ``gi``'s family beside them (``Candidate.beside``), in selection order."""
+    fam = groups[gi][0].family
+    return [g for g in selected if g != gi and getattr(groups[g][0], "beside", None) == fam]
+
+
+def _selected_shape(groups, selected: list[int], fam: str, name: str):
+    """The selected group of family ``fam`` that has shape ``name`` (its Candidate), or None."""
+    return next((groups[g][0] for g in selected if groups[g][0].family == fam and name in groups[g][0].nonlinear), None)
+
+
 def _shape_premise_holds(groups, selected: list[int], need: tuple[str, str] | None) -> bool:
     """A candidate's premise on a shape (``Candidate.needs_shape`` = (family, shape)): that family is selected and its
     shape is identified above the low end of its search range (for a width, the twist's noise: nothing narrower is a
@@ -1001,14 +1012,12 @@ def _shape_premise_holds(groups, selected: list[int], need: tuple[str, str] | No
     if need is None:
         return True
     fam, name = need
-    for g in selected:
-        cand = groups[g][0]
-        nl = cand.nonlinear
-        if cand.family == fam and name in nl:
-            sd = nl.get(f"{name}_sd", float("inf"))
-            lo = next((s.lo for s in cand.shapes if s.name == name), 0.0)
-            return bool(np.isfinite(sd) and nl[name] - 2.0 * sd > lo)
-    return False
+    cand = _selected_shape(groups, selected, fam, name)
+    if cand is None:
+        return False
+    sd = cand.nonlinear.get(f"{name}_sd", float("inf"))
+    lo = next((s.lo for s in cand.shapes if s.name == name), 0.0)
+    return bool(np.isfinite(sd) and cand.nonlinear[name] - 2.0 * sd > lo)
 
 
 def _beyond_holds(groups, selected: list[int], gi: int) -> bool:
@@ -1018,10 +1027,8 @@ def _beyond_holds(groups, selected: list[int], gi: int) -> bool:
     if need is None:
         return True
     fam, theirs, mine = need
-    for g in selected:
-        if groups[g][0].family == fam and theirs in groups[g][0].nonlinear:
-            return bool(groups[gi][0].nonlinear.get(mine, -np.inf) > groups[g][0].nonlinear[theirs])
-    return False
+    other = _selected_shape(groups, selected, fam, theirs)
+    return other is not None and bool(groups[gi][0].nonlinear.get(mine, -np.inf) > other.nonlinear[theirs])
 
 
 def confounded_swap(gram: _BlockGram, base_idx: list[int], groups, selected: list[int], gi: int, cur: np.ndarray,
