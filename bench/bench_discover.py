@@ -284,7 +284,7 @@ FAMILY_EFFECTS = {
     "cogging_torque": ({}, ("tau_m", "cogging_torque", "theta_m", None)),
     "current_ripple": ({}, ("tau_m", "current_ripple", "theta_m", None)),
     "bearing_load_friction": ({}, ("tau_m", "load_dependent_friction", "Q_red", None)),
-    "motor_thermal_drift": ({}, ("tau_m", "temperature_dependent_friction", "temperature", None)),
+    "motor_thermal_drift": ({}, ("tau_m", "motor_thermal_drift", "temperature", None)),
 }
 DEFAULT_FAMILY_EFFECTS = ("position_periodic_torque", "stribeck_friction", "kinematic_error_harmonic")
 #: discover's (and greedy's) acceleration derivative window (--alpha-window, core.choose_alpha_window): "identify"

@@ -86,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
             best = (float(r @ r), eps)
     eps_g = best[1]
     gbase = dbase + [np.tanh(w / eps_g)]
-    groups = _groups(sig, "tau_m", eps_g, avail)
+    t_ref = float(np.median(sig["temperature"][fit])) if "temperature" in avail else None  # greedy_discover's
+    groups = _groups(sig, "tau_m", eps_g, avail, t_ref)
     G0 = f"greedy baseline (tanh eps_g {eps_g:.3g})"
     report(G0, gbase, D)
     names = [f"{g[0]}({g[1]}, {g[2]})" + (f" ws#{i}" if g[0] == "stribeck_friction" else "")
@@ -96,15 +97,24 @@ def main(argv: list[str] | None = None) -> int:
     # swaps: each greedy group on top of discover's model, and discover's terms on greedy's baseline
     print("-- greedy's groups added to discover's model, one at a time:")
     dcols = dbase + ([] if replaces_tc else [fdir]) + tcols
-    groups_d = _groups(sig, "tau_m", eps_d, avail) if eps_d > 0 else groups  # on discover's friction direction
+    groups_d = _groups(sig, "tau_m", eps_d, avail, t_ref) if eps_d > 0 else groups  # on discover's friction direction
+    # a second column of the current times a temperature offset (another reference) beside discover's own spans the
+    # target itself (i_q = tau_m / k_t): never a comparison
+    has_drift = any(t["name"] == "motor_thermal_drift" for t in s0["terms"])
+    skip = {i for i, g in enumerate(groups) if has_drift and g[0] == "motor_thermal_drift"}
     for i in chosen:
         g = groups[i]
+        if i in skip:
+            print(f"   {g[0]}({g[1]}, {g[2]}) #{i}: in discover's model already (skipped)")
+            continue
         report(f"discover + {g[0]}({g[1]}, {g[2]}) #{i}", dcols + g[3], D)
         if groups_d is not groups and g[3] is not groups_d[i][3]:
             report(f"discover + {g[0]}({g[1]}, {g[2]}) #{i} at eps_d", dcols + groups_d[i][3], D)
     print("-- every greedy group on discover's model (CV of the fit blocks; the top few by CV):")
     res = []
     for i, g in enumerate(groups):
+        if i in skip:
+            continue
         r, cv = score(dcols + g[3])
         res.append((cv.sum(), np.sqrt(np.mean(r**2)), i))
     for cvs, hr, i in sorted(res)[:6]:

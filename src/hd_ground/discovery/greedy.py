@@ -3,10 +3,11 @@
 Baseline (tau_m): inertia alpha_m + load path Q_red/N + Coulomb tanh(omega_m/eps) + viscous omega_m, with eps
 picked from 8 values on the fit bags (least squares); (Q_red): K w + c w'. Then greedy forward selection over
 the same kinds of terms discovery considers (harmonics of theta_m / theta_f, plain and times sgn(omega_m),
-position-dependent stiffness, Stribeck at a few speeds, load-dependent and temperature-dependent friction,
-drag, bias, cubic stiffness, a dead zone at a few widths, hysteresis), each group scored by its **held-out**
-error (the held-out bag itself, as such a script does: optimistic for the reference), stopping when the best
-group lowers it by less than ``min_gain``. No identifiability test, no uncertainty, shapes from fixed grids.
+position-dependent stiffness, Stribeck at a few speeds, load-dependent and temperature-dependent friction, the
+torque constant's drift with temperature, drag, bias, cubic stiffness, a dead zone at a few widths, hysteresis),
+each group scored by its **held-out** error (the held-out bag itself, as such a script does: optimistic for the
+reference), stopping when the best group lowers it by less than ``min_gain``. No identifiability test, no
+uncertainty, shapes from fixed grids.
 
 ``select="cv"``: the same search scored by leave-one-bag-out cross-validation over the fit bags instead (each fit
 bag predicted from the others), the held-out bag used only for the final score: the variant an engineer who does
@@ -25,8 +26,11 @@ def _lstsq(X, y):
     return np.linalg.lstsq(X / s, y, rcond=None)[0] / s
 
 
-def _groups(sig: dict, target: str, eps: float, avail: set[str]) -> list[tuple[str, str | None, float | None, list]]:
-    """(name, variable, order, [columns]) of the candidate groups."""
+def _groups(sig: dict, target: str, eps: float, avail: set[str],
+            t_ref: float | None = None) -> list[tuple[str, str | None, float | None, list]]:
+    """(name, variable, order, [columns]) of the candidate groups. ``t_ref``: the temperature offsets' reference (the
+    fit rows' median; default the median of ``sig``). It matters for the torque constant's drift, whose column is
+    the current (the target over k_t) times T - t_ref: another reference adds a multiple of the target itself."""
     w = sig["omega_m"]
     sg = np.tanh(w / eps)
     g = []
@@ -50,8 +54,10 @@ def _groups(sig: dict, target: str, eps: float, avail: set[str]) -> list[tuple[s
         if "Q_red" in avail:
             g.append(("load_dependent_friction", "Q_red", None, [np.abs(sig["Q_red"]) * sg]))
         if "temperature" in avail:
-            dT = sig["temperature"] - np.median(sig["temperature"])
+            dT = sig["temperature"] - (np.median(sig["temperature"]) if t_ref is None else t_ref)
             g.append(("temperature_dependent_friction", "temperature", None, [w * dT, sg * dT]))
+            if "i_q" in avail:  # the torque constant's drift: the current scaled by the temperature offset
+                g.append(("motor_thermal_drift", "temperature", None, [sig["i_q"] * dT]))
         g.append(("unknown", "omega_m", None, [w * np.abs(w)]))  # drag
     elif "windup" in avail:
         wu = sig["windup"]
@@ -116,7 +122,8 @@ def greedy_discover(ds: Dataset, target: str, heldout: np.ndarray, *, min_gain: 
 
     score = (lambda X: ho_sse(X)[0]) if select == "heldout" else cv_sse
 
-    groups = _groups(sig, target, eps, avail)
+    groups = _groups(sig, target, eps, avail,
+                     float(np.median(sig["temperature"][fit])) if "temperature" in avail else None)
     X = Xb
     before, _ = ho_sse(X)
     cur = score(X)

@@ -269,6 +269,24 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
         lambda c: {"db_dT": float(c[0]), "dT_C_dT": float(c[1])},
         requires=("omega_m", "temperature"), nonlinear={"T_ref": ctx.t_ref},
     ))
+    # The torque constant's drift with temperature (motor_thermal_drift): the magnets' flux linkage falls with
+    # temperature (the torque estimate drifts by about -0.1 %/K; PHYSICS.md's
+    # effect table: regress on T i_q), while the drive logs tau_m = k_t,nom i_q with its
+    # nominal constant. The shaft torque is k_t,nom (1 - a (T - T_ref)) i_q, so against a torque balance fitted at
+    # T_ref the logged torque carries + k_t,nom a (T - T_ref) i_q: the current itself scaled by the temperature
+    # offset, whatever the current is spent on (inertia, load, friction). That is no friction term: a friction
+    # drift (the family above) scales sgn(omega_m) and omega_m, not the load path's share. The measured current
+    # (i_q = tau_m / k_t) is the regressor; the temperature is the logged one (the twin's, gearbox: the magnets'
+    # own temperature is logged by no drive); T_ref the fit data's median, so the current's noise, which the
+    # torque shares, averages out of the coefficient. k_t a > 0 for a constant that falls as the magnets warm.
+    out.append(Candidate(
+        "motor_thermal_drift", "torque_constant", "temperature", None,
+        [{"op": "prod", "factors": [{"op": "var", "var": "i_q"}, dict(tref)]}],
+        "k_t alpha_T (T - T_ref) i_q (the torque constant k_t (1 - alpha_T (T - T_ref)) against the logged "
+        "tau_m = k_t,nom i_q)",
+        lambda c: {"k_t_alpha_T": float(c[0])},
+        requires=("i_q", "temperature"), nonlinear={"T_ref": ctx.t_ref},
+    ))
     # Load-dependent (Coulomb share proportional to the transmitted torque).
     out.append(Candidate(
         "load_dependent_friction", "load", "Q_red", None,
