@@ -50,6 +50,7 @@ from hd_twin.terms import basis_matrix, evaluate_terms
 from .data import DEFAULT_ALPHA_WINDOW_S, DEFAULT_RETIME_WINDOW_S, Dataset, DiscoveryError, angle_resolution, with_smoothed_twist
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, measured_signal,
                       merge_orders, state_var)
+from .edgeshape import is_hard_dead_zone, refine_dead_zone_edge
 from .loopshape import refine_loop_shape, twist_state_of
 from .prefilter import (DERIVATIVE_SIGNALS, SHIFT_RANGE, filtered_design, shift_samples, shifted_state_var,
                         smooth_like_derivative)
@@ -193,6 +194,10 @@ class Options:
     # groups, the width group left out: it is the width's own alternative, and it fixed only its own columns' width)
     # or "skip" (not asked, the behaviour before branch disc32)
     width_second_look: str = "beside"
+    # the selected lost motion's edge (edgeshape.refine_dead_zone_edge): a dead zone with softplus corners replaces
+    # the hard one when their width is identified and lowers the fit blocks' CV by min_gain in most blocks; False:
+    # the hard zone only, the behaviour before the thirty-fifth pass
+    dead_zone_edge: bool = True
 
 
 @dataclass
@@ -1827,8 +1832,14 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 # 4a. the selected hysteresis loop's shape (loopshape: Bouc-Wen family, Dahl inside); when it
                 # replaces the Dahl loop, the selection is made again with it (once)
                 loop_done = True
-                if _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, ds.block, opt, statements, trace,
-                                 _apply_basis=lambda gi: (_relink(gi), confirmed.pop(gi, None))):
+                relink = lambda gi: (_relink(gi), confirmed.pop(gi, None))  # noqa: E731
+                looped = _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, ds.block, opt, statements,
+                                       trace, _apply_basis=relink)
+                # 4b. the selected lost motion's edge (edgeshape: softplus corners, the hard zone inside); when a
+                # rounded zone replaces the hard one, the selection is made again with it (once, with 4a's)
+                edged = opt.dead_zone_edge and _refine_edges(sel, groups, base_idx, X_all, srows, s_rows, y,
+                                                             ds.block, opt, statements, trace, _apply_basis=relink)
+                if looped or edged:
                     continue
             at_sel = {gi: {sh.name: float(groups[gi][0].nonlinear.get(sh.name, np.nan)) for sh in groups[gi][0].shapes}
                       for gi in sel if groups[gi][0].shapes}
@@ -2162,6 +2173,30 @@ def _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, st
             _apply_basis(gi)
             trace.append({"step": "loop shape", "candidate": f"{cand.name}[{cand.family}]",
                           "n_h": cand.nonlinear["n_h"], "phi_h": cand.nonlinear["phi_h"]})
+            changed = True
+    return changed
+
+
+def _refine_edges(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, statements, trace, _apply_basis) -> bool:
+    """The edge of every selected hard dead zone, given the other selected groups
+    (``edgeshape.refine_dead_zone_edge``); True when a rounded zone replaced one (its columns are then rebuilt)."""
+    changed = False
+    for gi in sel:
+        cand, cix = groups[gi]
+        if not is_hard_dead_zone(cand):
+            continue
+        others = [c for c in _model(base_idx, groups, [gj for gj in sel if gj != gi]) if c not in cand.replace_idx]
+        Xc = X_all[srows][:, others]
+
+        def design_of(make_basis, Xc=Xc):
+            return lambda sh: np.column_stack([Xc, basis_matrix(make_basis(sh), s_rows)])
+
+        ok_, st = refine_dead_zone_edge(cand, design_of, y[srows], block[srows], opt.min_gain, opt.fold_majority)
+        statements += st
+        if ok_:
+            _apply_basis(gi)
+            trace.append({"step": "edge shape", "candidate": f"{cand.name}[{cand.family}]",
+                          "j": cand.nonlinear["j"], "edge_ratio": cand.nonlinear["edge_ratio"]})
             changed = True
     return changed
 
