@@ -1832,7 +1832,10 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 # 4a. the selected hysteresis loop's shape (loopshape: Bouc-Wen family, Dahl inside); when it
                 # replaces the Dahl loop, the selection is made again with it (once)
                 loop_done = True
-                relink = lambda gi: (_relink(gi), confirmed.pop(gi, None))  # noqa: E731
+                def relink(gi):
+                    _relink(gi)
+                    confirmed.pop(gi, None)
+
                 looped = _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, ds.block, opt, statements,
                                        trace, _apply_basis=relink)
                 # 4b. the selected lost motion's edge (edgeshape: softplus corners, the hard zone inside); when a

@@ -13,7 +13,8 @@ The rounded zone **replaces** the hard one only by the selection's own rules: s 
 and the optimum off the searched range's bounds), and the fit blocks' CV error lower by ``min_gain`` in a majority
 (``fold_majority``) of the blocks. The selection is then made again with it (s / j fixed, j searched), so a knot of
 the torsion law or a contact ripple competes beside the rounded zone as it did beside the hard one. Otherwise the
-hard zone stays and the edge is reported (a statement and the term's ``edge_ratio``, its SE).
+hard zone stays and the edge is reported (a statement; the term's ``edge_ratio_tried``, ``edge_ratio_se`` and
+``edge_used`` 0).
 
 Why a separate step and not a second variant of the backlash family: variants of a family that explain the data
 within 10 % of the best one's improvement are one reading (the library's first is kept), and a dead zone's
@@ -82,7 +83,6 @@ def refine_dead_zone_edge(cand: Candidate, design_of, y: np.ndarray, block: np.n
     gain = float((sse_h.sum() - sse_s.sum()) / sse_h.sum()) if sse_h.sum() > 0 else 0.0
     folds = float(np.mean(sse_s < sse_h))
     sh, se = dict(best.shape), dict(best.se)
-    cand.nonlinear["edge_ratio"] = float(sh["r"])
     cand.nonlinear["edge_ratio_se"] = float(se["r"])
     cand.nonlinear["edge_ratio_weak"] = float("r" in best.weak)
     head = (f"lost motion's edge (softplus corners of width s; variable projection on the leave-one-block-out "
@@ -94,8 +94,7 @@ def refine_dead_zone_edge(cand: Candidate, design_of, y: np.ndarray, block: np.n
                f"CV gain {gain:.1%} < {min_gain:.0%}" if gain < min_gain else
                f"lower in {folds:.0%} of the blocks < {fold_majority:.0%}")
         cand.nonlinear["edge_used"] = 0.0
-        del cand.nonlinear["edge_ratio"]  # the law stays hard (is_hard_dead_zone asks this key)
-        cand.nonlinear["edge_ratio_tried"] = float(sh["r"])
+        cand.nonlinear["edge_ratio_tried"] = float(sh["r"])  # the law stays hard: no edge_ratio (is_hard_dead_zone)
         return False, [f"{head}: the hard dead zone is kept ({why})"]
     r_hat = float(sh["r"])
 
@@ -104,6 +103,7 @@ def refine_dead_zone_edge(cand: Candidate, design_of, y: np.ndarray, block: np.n
 
     cand.make_basis = rounded
     cand.basis = rounded({"j": float(sh["j"])})
+    cand.nonlinear["edge_ratio"] = r_hat
     cand.nonlinear["j"] = float(sh["j"])
     cand.nonlinear["j_se_joint"] = float(se["j"])
     cand.nonlinear["edge_used"] = 1.0
