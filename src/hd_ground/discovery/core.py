@@ -2156,6 +2156,19 @@ def chunked_paired_z(d: np.ndarray, n_chunks: int = 20) -> float | None:
     return float(m.mean() / se)
 
 
+def _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi):
+    """``design_of(make_basis)`` for a selected group's shape step: ``design(shape)`` is the other selected columns
+    (those the group replaces left out) beside the group's basis from ``make_basis(shape)``, on the shape rows."""
+    cand = groups[gi][0]
+    others = [c for c in _model(base_idx, groups, [gj for gj in sel if gj != gi]) if c not in cand.replace_idx]
+    Xc = X_all[srows][:, others]
+
+    def design_of(make_basis):
+        return lambda sh: np.column_stack([Xc, basis_matrix(make_basis(sh), s_rows)])
+
+    return design_of
+
+
 def _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, statements, trace, _apply_basis) -> bool:
     """The loop shape of every selected twist-hysteresis group, given the other selected groups
     (``loopshape.refine_loop_shape``); True when one replaced its Dahl loop (its columns are then rebuilt)."""
@@ -2164,12 +2177,7 @@ def _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, st
         cand, cix = groups[gi]
         if twist_state_of(cand) is None:
             continue
-        others = [c for c in _model(base_idx, groups, [gj for gj in sel if gj != gi]) if c not in cand.replace_idx]
-        Xc = X_all[srows][:, others]
-
-        def design_of(make_basis, Xc=Xc):
-            return lambda sh: np.column_stack([Xc, basis_matrix(make_basis(sh), s_rows)])
-
+        design_of = _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi)
         ok_, st = refine_loop_shape(cand, design_of, y[srows], block[srows], opt.min_gain)
         statements += st
         if ok_:
@@ -2188,12 +2196,7 @@ def _refine_edges(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, st
         cand, cix = groups[gi]
         if not is_hard_dead_zone(cand):
             continue
-        others = [c for c in _model(base_idx, groups, [gj for gj in sel if gj != gi]) if c not in cand.replace_idx]
-        Xc = X_all[srows][:, others]
-
-        def design_of(make_basis, Xc=Xc):
-            return lambda sh: np.column_stack([Xc, basis_matrix(make_basis(sh), s_rows)])
-
+        design_of = _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi)
         ok_, st = refine_dead_zone_edge(cand, design_of, y[srows], block[srows], opt.min_gain, opt.fold_majority)
         statements += st
         if ok_:
