@@ -8,9 +8,6 @@ theta_f range) was "found" on clean data of the default world as a cubic in thet
 x 4 s as the bench acquires them (bench_discover.make_family_bags), Q_red only.
 """
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -19,10 +16,7 @@ from hd_ground.discovery.core import baseline_columns
 from hd_ground.discovery.data import dataset_from_missions
 from hd_ground.discovery.pipeline import run_discovery
 
-_BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_discover.py"
-_spec = importlib.util.spec_from_file_location("bench_discover_for_output_inertia", _BENCH)
-bd = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bd)
+from .bench_module import bd
 
 
 def test_q_red_baseline_has_the_output_inertia_only_when_the_acceleration_is_there():

@@ -12,15 +12,9 @@ named the effect (0.3382). A candidate now requires the logged signal under a de
 ~20 s (bags 5 s, discover on tau_m 15 s).
 """
 
-import importlib.util
-from pathlib import Path
-
 from hd_ground.discovery.library import LibraryContext, build_candidates, measured_signal, state_var
 
-_BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_discover.py"
-_spec = importlib.util.spec_from_file_location("bench_discover_presliding_for_tests", _BENCH)
-bd = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bd)
+from .bench_module import bd
 
 _AVAIL = {"theta_m", "theta_f", "omega_m", "omega_f", "Q_red", "i_q", "temperature", "tau_m"}
 

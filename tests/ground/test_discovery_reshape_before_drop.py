@@ -21,14 +21,9 @@ the test runs with the catalog the rule was found with.
 ~20 s (bags 10 s, discover and greedy 10 s).
 """
 
-import importlib.util
 import json
-from pathlib import Path
 
-_BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_discover.py"
-_spec = importlib.util.spec_from_file_location("bench_discover_reshape_for_tests", _BENCH)
-bd = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bd)
+from .bench_module import bd
 
 
 def test_a_dead_zone_unidentified_beside_the_cubic_law_is_reshaped_then_left_out(tmp_path, monkeypatch):

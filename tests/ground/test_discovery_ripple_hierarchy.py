@@ -15,16 +15,11 @@ after (`test_discovery_ripple_stiffness.py`); gating it behind the plain ripple 
 ~15 s (bags 5 s, discover on Q_red 10 s).
 """
 
-import importlib.util
 import json
-from pathlib import Path
 
 from hd_ground.discovery.library import LibraryContext, build_candidates
 
-_BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_discover.py"
-_spec = importlib.util.spec_from_file_location("bench_discover_ripple_hierarchy_for_tests", _BENCH)
-bd = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bd)
+from .bench_module import bd
 
 
 def test_every_w2_ripple_needs_the_plain_ripple_of_its_order_beside_it():

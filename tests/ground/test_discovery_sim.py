@@ -21,16 +21,11 @@ The truth (``/sim/effects``) is read by the test only. Tolerances are stated
 per parameter in ``bench_discover.parameter_checks``.
 """
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-_BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_discover.py"
-_spec = importlib.util.spec_from_file_location("bench_discover_for_tests", _BENCH)
-bd = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bd)
+from .bench_module import bd
 
 TESTED = [c for c in bd.CASES if c.tested]
 

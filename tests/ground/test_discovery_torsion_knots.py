@@ -20,18 +20,12 @@ knot, orphaned, went after it: held-out 93.6 against 15.3 before. A part of an e
 takes its partner's identification is now dropped first, and the partner asked again without it.
 """
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 
 from hd_ground.discovery.core import Options, _BlockGram, select_groups
 from hd_ground.discovery.library import Candidate, LibraryContext, build_candidates
 
-_BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_discover.py"
-_spec = importlib.util.spec_from_file_location("bench_discover_torsion_knots_for_tests", _BENCH)
-bd = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bd)
+from .bench_module import bd
 
 
 def test_knots_refine_a_selected_law_and_need_it_beside_them():

@@ -13,15 +13,9 @@ built once); the evaluation is ``bench/bench_discover.py``'s (``hdphm bench disc
 for every catalog effect on every family).
 """
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-_BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_discover.py"
-_spec = importlib.util.spec_from_file_location("bench_discover_worlds_for_tests", _BENCH)
-bd = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bd)
+from .bench_module import bd
 
 #: (world, hidden effect): one per world (hdphm bench discover prints every catalog effect on every family)
 CASES = [
