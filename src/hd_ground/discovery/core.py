@@ -2169,42 +2169,43 @@ def _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi):
     return design_of
 
 
-def _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, statements, trace, _apply_basis) -> bool:
-    """The loop shape of every selected twist-hysteresis group, given the other selected groups
-    (``loopshape.refine_loop_shape``); True when one replaced its Dahl loop (its columns are then rebuilt)."""
+def _refine_selected(sel, groups, base_idx, X_all, srows, s_rows, y, block, statements, trace, _apply_basis, applies,
+                     refine, step: str, keys: tuple[str, ...]) -> bool:
+    """A law-shape step over every selected group it ``applies`` to, each given the other selected groups:
+    ``refine(cand, design_of, y, block) -> (replaced, statements)``; a group whose law was replaced has its columns
+    rebuilt (``_apply_basis``) and a trace record ``step`` with its ``keys``. True when one was replaced."""
     changed = False
     for gi in sel:
-        cand, cix = groups[gi]
-        if twist_state_of(cand) is None:
+        cand = groups[gi][0]
+        if not applies(cand):
             continue
         design_of = _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi)
-        ok_, st = refine_loop_shape(cand, design_of, y[srows], block[srows], opt.min_gain)
+        ok_, st = refine(cand, design_of, y[srows], block[srows])
         statements += st
         if ok_:
             _apply_basis(gi)
-            trace.append({"step": "loop shape", "candidate": f"{cand.name}[{cand.family}]",
-                          "n_h": cand.nonlinear["n_h"], "phi_h": cand.nonlinear["phi_h"]})
+            trace.append({"step": step, "candidate": f"{cand.name}[{cand.family}]"}
+                         | {k: cand.nonlinear[k] for k in keys})
             changed = True
     return changed
+
+
+def _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, statements, trace, _apply_basis) -> bool:
+    """The loop shape of every selected twist-hysteresis group, given the other selected groups
+    (``loopshape.refine_loop_shape``); True when one replaced its Dahl loop (its columns are then rebuilt)."""
+    return _refine_selected(sel, groups, base_idx, X_all, srows, s_rows, y, block, statements, trace, _apply_basis,
+                            lambda c: twist_state_of(c) is not None,
+                            lambda c, d, yy, bb: refine_loop_shape(c, d, yy, bb, opt.min_gain),
+                            "loop shape", ("n_h", "phi_h"))
 
 
 def _refine_edges(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, statements, trace, _apply_basis) -> bool:
     """The edge of every selected hard dead zone, given the other selected groups
     (``edgeshape.refine_dead_zone_edge``); True when a rounded zone replaced one (its columns are then rebuilt)."""
-    changed = False
-    for gi in sel:
-        cand, cix = groups[gi]
-        if not is_hard_dead_zone(cand):
-            continue
-        design_of = _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi)
-        ok_, st = refine_dead_zone_edge(cand, design_of, y[srows], block[srows], opt.min_gain, opt.fold_majority)
-        statements += st
-        if ok_:
-            _apply_basis(gi)
-            trace.append({"step": "edge shape", "candidate": f"{cand.name}[{cand.family}]",
-                          "j": cand.nonlinear["j"], "edge_ratio": cand.nonlinear["edge_ratio"]})
-            changed = True
-    return changed
+    return _refine_selected(sel, groups, base_idx, X_all, srows, s_rows, y, block, statements, trace, _apply_basis,
+                            is_hard_dead_zone,
+                            lambda c, d, yy, bb: refine_dead_zone_edge(c, d, yy, bb, opt.min_gain, opt.fold_majority),
+                            "edge shape", ("j", "edge_ratio"))
 
 
 def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray, omega: np.ndarray | None = None,

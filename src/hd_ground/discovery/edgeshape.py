@@ -77,9 +77,8 @@ def refine_dead_zone_edge(cand: Candidate, design_of, y: np.ndarray, block: np.n
         return False, ["lost motion's edge: not computed (singular design); the hard dead zone is kept"]
     best = min(fits, key=lambda f: f.cv_rmse)
     r_soft = cv_residuals(y, design(best.shape), block)
-    blocks = np.unique(block)
-    sse_h = np.array([np.sum(r_hard[block == b] ** 2) for b in blocks])
-    sse_s = np.array([np.sum(r_soft[block == b] ** 2) for b in blocks])
+    inv = np.unique(block, return_inverse=True)[1]  # per-block SSE of each zone's CV residuals
+    sse_h, sse_s = np.bincount(inv, r_hard**2), np.bincount(inv, r_soft**2)
     gain = float((sse_h.sum() - sse_s.sum()) / sse_h.sum()) if sse_h.sum() > 0 else 0.0
     folds = float(np.mean(sse_s < sse_h))
     sh, se = dict(best.shape), dict(best.se)
