@@ -535,6 +535,15 @@ class ShapeVP:
     notes: list[str] = field(default_factory=list)
 
 
+def scaled_lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least squares with every column scaled to unit RMS first: columns of a physical model differ by many orders of
+    magnitude (a twist ~1e-3 rad, its cube ~1e-9), and ``lstsq``'s rank cut-off, relative to the largest singular
+    value, would otherwise drop the small ones."""
+    scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
+    beta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
+    return beta / scale
+
+
 def cv_residuals(y: np.ndarray, X: np.ndarray, block: np.ndarray) -> np.ndarray:
     """Leave-one-block-out residuals: each row predicted by the least-squares fit on the other blocks."""
     y = np.asarray(y, float)

@@ -52,6 +52,8 @@ spec                                              value
 ``{"op": "within", "var": v, "width": d}``        1 where abs(v) < d, 0 where abs(v) > d (1/2 at d): inside that lost
                                                   motion, no contact (1 - the dead zone's slope)
 ``{"op": "prod", "factors": [spec, ...]}``        product of the factors
+``{"op": "sum", "terms": [spec, ...],              sum_i w_i spec_i: a fixed function made of others (e.g. an
+   "weights": [w, ...]}``                         identified torsion law inside a product, its weights fixed)
 ================================================  =============================================
 
 Everything here is pure and array-namespace agnostic: ``xp`` must provide
@@ -88,7 +90,7 @@ CATALOG_NAMES = (
 )
 TARGET_SIGNALS = ("tau_m", "Q_red")
 BASIS_OPS = ("const", "var", "sin", "cos", "sgn", "abs", "pow", "offset", "stribeck", "exp_decay", "deadzone", "within",
-             "expm1", "prod")
+             "expm1", "prod", "sum")
 
 # ---------------------------------------------------------------------------
 # validation
@@ -120,6 +122,17 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
             raise ValueError(f"{where}: 'prod' needs a non-empty list 'factors'")
         for i, f in enumerate(factors):
             validate_basis(f, f"{where}.factors[{i}]")
+        return
+    if op == "sum":
+        parts, weights = spec.get("terms"), spec.get("weights")
+        if not isinstance(parts, list) or not parts:
+            raise ValueError(f"{where}: 'sum' needs a non-empty list 'terms'")
+        if not isinstance(weights, list) or len(weights) != len(parts):
+            n = len(weights) if isinstance(weights, list) else None
+            raise ValueError(f"{where}: 'sum' needs one number in 'weights' per spec in 'terms' ({len(parts)}), got {n}")
+        for i, (f, w) in enumerate(zip(parts, weights)):
+            _finite_number(w, f"{where}.weights[{i}]")
+            validate_basis(f, f"{where}.terms[{i}]")
         return
     if not isinstance(spec.get("var"), str) or not spec["var"]:
         raise ValueError(f"{where}: op {op!r} needs a signal name in 'var'")
@@ -187,6 +200,17 @@ def validate_term(term: Mapping[str, Any], where: str = "term") -> None:
         _finite_number(order, f"{where}: 'order'")
 
 
+def children(spec: Mapping[str, Any]) -> list:
+    """The specs a composite basis spec is made of (a product's factors, a sum's terms); [] for a leaf."""
+    op = spec.get("op")
+    return list(spec["factors"]) if op == "prod" else list(spec["terms"]) if op == "sum" else []
+
+
+def with_children(spec: Mapping[str, Any], parts: list) -> dict:
+    """A copy of the composite ``spec`` with its parts replaced by ``parts`` (same order)."""
+    return {**spec, ("factors" if spec.get("op") == "prod" else "terms"): list(parts)}
+
+
 def _is_tensor(x: Any) -> bool:
     return type(x).__module__.startswith("torch")
 
@@ -230,6 +254,12 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
         for i, f in enumerate(spec["factors"]):
             v = evaluate_basis(f, signals, xp, f"{where}.factors[{i}]")
             out = v if out is None else out * v
+        return out
+    if op == "sum":
+        out = None
+        for i, (f, w) in enumerate(zip(spec["terms"], spec["weights"])):
+            v = float(w) * evaluate_basis(f, signals, xp, f"{where}.terms[{i}]")
+            out = v if out is None else out + v
         return out
     x = _get(signals, spec["var"], where)
     if op == "var":
@@ -374,8 +404,8 @@ def required_signals(terms: Iterable[Mapping[str, Any]]) -> set[str]:
     need: set[str] = set()
 
     def walk(b):
-        if b["op"] == "prod":
-            for f in b["factors"]:
+        if b["op"] in ("prod", "sum"):
+            for f in b["factors" if b["op"] == "prod" else "terms"]:
                 walk(f)
         elif b["op"] != "const":
             need.add(b["var"])

@@ -39,9 +39,12 @@ def log_as_drive(th: np.ndarray, w: np.ndarray, tau: np.ndarray, fs: float, sub:
             "tau_m": tau.reshape(n, sub).mean(1) + rng.normal(0, 0.02, n)}
 
 
-def torsion_plant(spring, position_error=None, seed: int = 1, torque=None) -> tuple[Dataset, np.ndarray]:
+def torsion_plant(spring, position_error=None, seed: int = 1, torque=None, stiffness=None
+                  ) -> tuple[Dataset, np.ndarray]:
     """``spring(x)``: the torsion law's torque at deflection x; ``position_error(theta_m)``: e inside the spring;
-    ``torque(theta_m)``: a torque added outside the spring (a ripple that does not pass through the torsion law)."""
+    ``torque(theta_m, w)``: a torque added outside the spring (a ripple that does not pass through the torsion law);
+    ``stiffness(theta_m)``: the spring's relative stiffness (it scales the whole law: 1 + eps cos(k theta_m) for a
+    mesh whose teeth in contact vary with position)."""
     rng = np.random.default_rng(seed)
     n = int(FS * T_BAG)
     t = np.arange(n) / FS
@@ -52,7 +55,8 @@ def torsion_plant(spring, position_error=None, seed: int = 1, torque=None) -> tu
         wu = 2.5e-3 * np.sin(2 * np.pi * (0.13 + 0.02 * i) * t + i) + 3e-4 * np.sin(2 * np.pi * 1.7 * t)
         wud = np.gradient(wu, t)
         x = wu if position_error is None else wu - position_error(th)
-        Q = spring(x) + 50.0 * wud + rng.normal(0, 3.0, n) + (0.0 if torque is None else torque(th))
+        Q = (spring(x) * (1.0 if stiffness is None else stiffness(th)) + 50.0 * wud + rng.normal(0, 3.0, n)
+             + (0.0 if torque is None else torque(th, wu)))
         for k, v in (("theta_m", th), ("omega_m", om), ("alpha_m", np.gradient(om, t)), ("theta_f", th / N - wu),
                      ("phi", -wu), ("windup", wu), ("windup_dot", wud), ("Q_red", Q)):
             cols[k].append(v)

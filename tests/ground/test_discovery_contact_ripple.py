@@ -45,7 +45,7 @@ def test_a_ripple_through_the_lost_motion_vanishes_inside_it(seed):
 
 def test_a_ripple_outside_the_spring_does_not_get_the_contact_part():
     # the same dead zone, the same ripple's size, added as a torque that does not pass through the torsion law
-    ds, ho = torsion_plant(_dead_zone, None, 1, torque=lambda th: -K * E2 * np.sin(2 * th + PSI))
+    ds, ho = torsion_plant(_dead_zone, None, 1, torque=lambda th, w: -K * E2 * np.sin(2 * th + PSI))
     r = discover_signal(ds, "Q_red", ho)
     plain, contact = _ke(r)
     assert plain and not contact, r.cv_trace

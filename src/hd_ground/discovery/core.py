@@ -44,13 +44,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_state, vp_shape
-from hd_twin.terms import basis_matrix, evaluate_terms
+from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_state, scaled_lstsq, vp_shape
+from hd_twin.terms import basis_matrix, children, evaluate_terms, with_children
 
 from .data import DEFAULT_ALPHA_WINDOW_S, DEFAULT_RETIME_WINDOW_S, Dataset, DiscoveryError, angle_resolution, with_smoothed_twist
 from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, measured_signal,
                       merge_orders, state_var)
 from .edgeshape import is_hard_dead_zone, refine_dead_zone_edge
+from .lawmod import is_linear_stiffness_ripple, is_torsion_law, refine_stiffness_modulation
 from .loopshape import refine_loop_shape, twist_state_of
 from .prefilter import (DERIVATIVE_SIGNALS, SHIFT_RANGE, filtered_design, shift_samples, shifted_state_var,
                         smooth_like_derivative)
@@ -109,8 +110,8 @@ def uses_state(term_or_basis) -> bool:
     basis = term_or_basis.get("basis", []) if isinstance(term_or_basis, dict) else term_or_basis
 
     def walk(b):
-        if b.get("op") == "prod":
-            return any(walk(f) for f in b["factors"])
+        if children(b):
+            return any(walk(f) for f in children(b))
         return str(b.get("var", "")).startswith(STATE_PREFIX)
     return any(walk(b) for b in basis)
 
@@ -125,9 +126,9 @@ def static_term(term: dict, eps_omega: float | None) -> dict | None:
     import copy
 
     def conv(b):
-        if b.get("op") == "prod":
-            fs = [conv(f) for f in b["factors"]]
-            return None if any(f is None for f in fs) else {**b, "factors": fs}
+        if children(b):
+            fs = [conv(f) for f in children(b)]
+            return None if any(f is None for f in fs) else with_children(b, fs)
         v = str(b.get("var", ""))
         if not v.startswith(STATE_PREFIX):
             return copy.deepcopy(b)
@@ -198,6 +199,9 @@ class Options:
     # the hard one when their width is identified and lowers the fit blocks' CV by min_gain in most blocks; False:
     # the hard zone only, the behaviour before the thirty-fifth pass
     dead_zone_edge: bool = True
+    # a selected linear stiffness ripple beside a nonlinear torsion law is read on that law (lawmod), when the fit
+    # blocks' CV prefers it; False: the linear ripple K eps w only (the behaviour before the thirty-sixth pass)
+    stiffness_law_modulation: bool = True
 
 
 @dataclass
@@ -484,9 +488,7 @@ def _shape_rows(fit: np.ndarray, max_rows: int = 24000) -> np.ndarray:
 
 
 def _lstsq(X, y):
-    scale = np.sqrt(np.mean(X**2, 0)) + 1e-300
-    beta, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
-    return beta / scale
+    return scaled_lstsq(X, y)
 
 
 def _paired_t(sse_a: np.ndarray, sse_b: np.ndarray) -> float:
@@ -1294,8 +1296,8 @@ def _reidentify_width(y, sig, srows, block, target, avail, declared, extra_terms
 
     def with_eps(b, eps):
         # the selected groups' friction direction tanh(omega_m / eps0) follows the width under search
-        if b.get("op") == "prod":
-            return {**b, "factors": [with_eps(f, eps) for f in b["factors"]]}
+        if children(b):
+            return with_children(b, [with_eps(f, eps) for f in children(b)])
         if b.get("op") == "sgn" and b.get("var") == "omega_m" and b.get("eps") == eps0:
             return {**b, "eps": float(eps)}
         return b
@@ -1407,8 +1409,8 @@ def _swap_state(b: dict, old, new_var: str) -> dict:
     too). ``old``: a pre-sliding state spec (its column is swapped) or a tanh width (float): then every
     tanh(omega_m / eps) becomes the state and a Stribeck excess exp(-(|omega_m|/omega_s)^delta) tanh(omega_m / eps)
     rides on it, as the library builds its candidates on a state baseline (``library.friction_candidates``)."""
-    if b.get("op") == "prod":
-        return {**b, "factors": [_swap_state(f, old, new_var) for f in b["factors"]]}
+    if children(b):
+        return with_children(b, [_swap_state(f, old, new_var) for f in children(b)])
     if isinstance(old, dict):
         return {**b, "var": new_var} if b.get("var") == old["var"] else b
     if b.get("var") == "omega_m" and b.get("op") == "sgn":
@@ -1842,7 +1844,12 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                 # rounded zone replaces the hard one, the selection is made again with it (once, with 4a's)
                 edged = opt.dead_zone_edge and _refine_edges(sel, groups, base_idx, X_all, srows, s_rows, y,
                                                              ds.block, opt, statements, trace, _apply_basis=relink)
-                if looped or edged:
+                # 4c. a selected linear stiffness ripple read on the identified torsion law (lawmod: f(w) times the
+                # ripple, f the model's own law); when it replaces the linear one, the selection is made again
+                modulated = opt.stiffness_law_modulation and _refine_modulations(
+                    sel, groups, base_idx, cols, X_all, srows, s_rows, y, ds.block, opt, statements, trace,
+                    _apply_basis=relink)
+                if looped or edged or modulated:
                     continue
             at_sel = {gi: {sh.name: float(groups[gi][0].nonlinear.get(sh.name, np.nan)) for sh in groups[gi][0].shapes}
                       for gi in sel if groups[gi][0].shapes}
@@ -2208,6 +2215,37 @@ def _refine_edges(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, st
                             "edge shape", ("j", "edge_ratio"))
 
 
+def _refine_modulations(sel, groups, base_idx, cols, X_all, srows, s_rows, y, block, opt, statements, trace,
+                        _apply_basis) -> bool:
+    """Every selected linear stiffness ripple beside a nonlinear torsion law, read on that law
+    (``lawmod.refine_stiffness_modulation``): the law is the baseline's K w and the selected groups that are functions of
+    the twist alone, at the model's coefficients. True when one was replaced (its columns are then rebuilt)."""
+    changed = False
+    for gi in sel:
+        cand = groups[gi][0]
+        if not is_linear_stiffness_ripple(cand):
+            continue
+        laws = [gj for gj in sel if gj != gi and is_torsion_law(groups[gj][0])]
+        base_k = [j for j in base_idx if cols[j].param == "K"]
+        if not laws or not base_k:
+            continue  # a linear law: the ripple on it is the linear ripple
+        others = [c for c in _model(base_idx, groups, [gj for gj in sel if gj != gi]) if c not in cand.replace_idx]
+        law_cols = base_k + [c for gj in laws for c in groups[gj][1]]
+        law_specs = [cols[j].basis for j in base_k] + [b for gj in laws for b in groups[gj][0].basis]
+        if any(c not in others for c in law_cols):
+            continue
+        ok_, st = refine_stiffness_modulation(cand, X_all[srows][:, others], [others.index(c) for c in law_cols],
+                                              law_specs, s_rows, y[srows], block[srows], opt.min_gain,
+                                              opt.fold_majority)
+        statements += st
+        if ok_:
+            _apply_basis(gi)
+            trace.append({"step": "stiffness on the law", "candidate": f"{cand.name}[{cand.family}]",
+                          "law": ", ".join(f"{groups[gj][0].name}[{groups[gj][0].family}]" for gj in laws)})
+            changed = True
+    return changed
+
+
 def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray, omega: np.ndarray | None = None,
                       alpha: np.ndarray | None = None) -> list[str]:
     """Uncertainty of a selected group's identified shape (``hd_twin.identify.vp_shape``); statements.
@@ -2507,8 +2545,8 @@ def angle_skew_of(lags: dict) -> float | None:
 def uses_angle_harmonic(terms: list[dict]) -> bool:
     """Whether any of ``terms`` holds a harmonic (sin / cos) of an angle (theta_m, theta_f)."""
     def walk(b):
-        if b.get("op") == "prod":
-            return any(walk(f) for f in b["factors"])
+        if children(b):
+            return any(walk(f) for f in children(b))
         return b.get("op") in ("sin", "cos") and b.get("var") in ("theta_m", "theta_f")
     return any(walk(b) for t in terms or [] for b in t["basis"])
 
