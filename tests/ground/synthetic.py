@@ -39,6 +39,17 @@ def log_as_drive(th: np.ndarray, w: np.ndarray, tau: np.ndarray, fs: float, sub:
             "tau_m": tau.reshape(n, sub).mean(1) + rng.normal(0, 0.02, n)}
 
 
+def log_motor_with_load(th, w, i_q, Q, rng, *, kt: float, ratio: float, fs: float, sub: int) -> dict:
+    """A loaded motor's bag as a drive logs it: ``log_as_drive`` of the drive's torque k_t i_q (its nominal k_t), the
+    output torque ``Q`` sampled with 0.05 N*m noise, Q / ratio, and i_q = tau_m / k_t (the current the drive logs)."""
+    c = log_as_drive(th, w, kt * i_q, fs, sub, rng)
+    n = len(c["tau_m"])
+    c["Q_red"] = Q[::sub][:n] + rng.normal(0, 0.05, n)
+    c["Q_red_over_N"] = c["Q_red"] / ratio
+    c["i_q"] = c["tau_m"] / kt
+    return c
+
+
 def torsion_plant(spring, position_error=None, seed: int = 1, torque=None, stiffness=None
                   ) -> tuple[Dataset, np.ndarray]:
     """``spring(x)``: the torsion law's torque at deflection x; ``position_error(theta_m)``: e inside the spring;

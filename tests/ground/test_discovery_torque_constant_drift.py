@@ -14,7 +14,7 @@ import pytest
 
 from hd_ground.discovery.core import discover_signal
 
-from .synthetic import dataset, log_as_drive
+from .synthetic import dataset, log_motor_with_load
 
 FS, SUB, T_BAG, NR, KT = 500.0, 40, 6.0, 50.0, 0.3
 J, B, EPS, T_C = 0.01, 0.02, 0.5, 0.05
@@ -35,11 +35,8 @@ def _plant(drift: float = 0.0, dTC_dT: float = 0.0, seed: int = 0):
         Q = 40.0 * np.sin(2 * np.pi * (0.23 + 0.05 * i) * tf + i) + 25.0 * np.sin(2 * np.pi * 1.1 * tf)
         shaft = (J * np.gradient(w, tf) + (T_C + dTC_dT * (temp - 25.0)) * np.tanh(w / EPS) + B * w + Q / NR)
         i_q = shaft / (KT * (1.0 - drift * (temp - 25.0)))
-        c = log_as_drive(th, w, KT * i_q, FS, SUB, rng)  # the drive's torque: its nominal k_t times the current
+        c = log_motor_with_load(th, w, i_q, Q, rng, kt=KT, ratio=NR, fs=FS, sub=SUB)  # logged torque: k_t,nom i_q
         c["temperature"] = np.round((temp[::SUB] + rng.normal(0, 0.05, n)) / 0.1) * 0.1
-        c["Q_red"] = Q[::SUB] + rng.normal(0, 0.05, n)
-        c["Q_red_over_N"] = c["Q_red"] / NR
-        c["i_q"] = c["tau_m"] / KT
         for k, v in c.items():
             cols[k].append(v)
     return dataset(cols, t, ratio=NR)

@@ -44,7 +44,8 @@ def plot_result(r: SignalResult, out: Path, ds: Dataset) -> list[str]:
         for a, s in zip(axs[:, 0], r.spectra):
             if len(s.orders):
                 a.semilogy(s.orders, np.maximum(s.amplitude, 1e-12), lw=0.7)
-                a.axhline(s.floor, color="grey", ls=":", lw=0.8, label="median floor")
+                fl = s.floor * (s.noise_scale if s.noise_scale is not None else np.ones(len(s.orders)))
+                a.semilogy(s.orders, fl, color="grey", ls=":", lw=0.8, label="median floor (per order's noise level)")
                 for k in s.peaks:
                     a.axvline(k, color="r", lw=0.6, alpha=0.6)
             a.set_title(f"baseline residual of {sig} vs {s.variable} {('x ' + s.modulator) if s.modulator else ''}"

@@ -10,6 +10,15 @@ a uniform angle grid and taking the DFT, but exact for any speed profile,
 reversals included; standstill samples get no weight). |R(k)| is the amplitude
 of the order-k component in the residual's unit (N*m) at order k, cycles per
 revolution of theta. Evaluated on a grid of orders with numpy, in chunks.
+
+Orders above what the fastest rows sample: an order-k line needs >= 4 samples per period, k |d theta| <= pi / 2.
+A log at 1 kHz of a motor at 140 rad/s resolves orders up to ~11 on every row, but at 30 rad/s up to ~50: the
+torque ripple of a PMSM (6 p, 12 p electrical orders, e.g. 30 and 60 mechanical for 5 pole pairs) and other
+high-order lines are visible in the slower rows. Each order's integral therefore uses the rows that sample it
+(``k |d theta_i| <= pi / 2``), normalised by their own angle travelled, and the grid extends to the order that a
+quarter of the angle travelled still resolves. Lines are found on the amplitude divided by its white-noise
+standard error, sqrt(sum w_i^2) / sum w_i (unit residual variance): an order seen by fewer rows is noisier, and a
+floor taken over orders of unequal support would call its noise a line.
 """
 
 from __future__ import annotations
@@ -25,9 +34,12 @@ class OrderSpectrum:
     modulator: str  # "" (plain residual) or "sgn(omega_m)" (residual times the sign of motion)
     orders: np.ndarray  # cycles per revolution
     amplitude: np.ndarray  # N*m
-    floor: float  # N*m, median amplitude (noise floor)
+    floor: float  # N*m, median amplitude (noise floor), each order scaled to the best-supported order's noise level
     peaks: list[float]  # detected orders, strongest first
     revolutions: float  # angle range covered, revolutions
+    # per order, its amplitude's noise level relative to the best-supported order's (>= 1; the floor at an order is
+    # floor * noise_scale: an order seen by fewer rows is noisier); None: 1 everywhere
+    noise_scale: np.ndarray | None = None
 
 
 def angle_weights(theta: np.ndarray, segment: np.ndarray | None = None) -> np.ndarray:
@@ -41,30 +53,44 @@ def angle_weights(theta: np.ndarray, segment: np.ndarray | None = None) -> np.nd
     return d
 
 
+#: samples per period an order needs in a row for that row to enter its integral (k |d theta| <= 2 pi / this)
+SAMPLES_PER_PERIOD = 4.0
+
+
 def order_spectrum(
     r: np.ndarray,
     theta: np.ndarray,
     orders: np.ndarray,
     weights: np.ndarray | None = None,
     chunk: int = 64,
-) -> np.ndarray:
-    """Amplitude |R(k)| (unit of r) of the order components of ``r`` against ``theta`` (rad)."""
+    return_se: bool = False,
+):
+    """Amplitude |R(k)| (unit of r) of the order components of ``r`` against ``theta`` (rad); each order from the
+    rows that sample it (``k |d theta| <= 2 pi / SAMPLES_PER_PERIOD``). ``return_se``: also the amplitude's white-noise
+    standard error per order for a unit residual variance, sqrt(sum w^2) / sum w over those rows (inf: no row)."""
     r = np.asarray(r, float)
     theta = np.asarray(theta, float)
     w = angle_weights(theta) if weights is None else np.asarray(weights, float)
     ok = np.isfinite(r) & np.isfinite(theta) & (w > 0)
     r, theta, w = r[ok], theta[ok], w[ok]
+    out = np.zeros(len(orders))
+    se = np.full(len(orders), np.inf)
     if w.sum() <= 0:
-        return np.zeros(len(orders))
-    rw = (r - np.average(r, weights=w)) * w / w.sum()
-    out = np.empty(len(orders))
+        return (out, se) if return_se else out
+    step = np.abs(np.gradient(theta)) if len(theta) > 1 else np.zeros(len(theta))
+    rc = r - np.average(r, weights=w)
+    lim = 2 * np.pi / SAMPLES_PER_PERIOD
     for i in range(0, len(orders), chunk):
         k = orders[i : i + chunk, None]
+        wk = w[None, :] * (k * step[None, :] <= lim)
+        sw = wk.sum(1)
         ph = k * theta[None, :]
-        c = np.cos(ph) @ rw
-        s = np.sin(ph) @ rw
-        out[i : i + chunk] = 2.0 * np.hypot(c, s)
-    return out
+        good = sw > 0
+        c = np.einsum("ij,ij->i", np.cos(ph), wk * rc[None, :])
+        s = np.einsum("ij,ij->i", np.sin(ph), wk * rc[None, :])
+        out[i : i + chunk] = np.where(good, 2.0 * np.hypot(c, s) / np.where(good, sw, 1.0), 0.0)
+        se[i : i + chunk] = np.where(good, np.sqrt((wk**2).sum(1)) / np.where(good, sw, 1.0), np.inf)
+    return (out, se) if return_se else out
 
 
 def order_grid(theta: np.ndarray, *, k_max: float = 200.0, max_points: int = 3000) -> tuple[np.ndarray, float]:
@@ -81,8 +107,12 @@ def order_grid(theta: np.ndarray, *, k_max: float = 200.0, max_points: int = 300
     step = step[step > 0]
     if revs < 1.0 or len(step) == 0:
         return np.zeros(0), revs
-    # Nyquist in the angle domain, with margin: 4 samples per period at the 95th-percentile step.
-    k_top = min(k_max, 2 * np.pi / (4 * np.quantile(step, 0.95)))
+    # Nyquist in the angle domain, with margin: 4 samples per period (SAMPLES_PER_PERIOD) on the rows that carry a
+    # quarter of the angle travelled (the slowest ones: each order is integrated over the rows that sample it)
+    srt = np.sort(step)
+    cum = np.cumsum(srt)
+    q_step = float(srt[min(np.searchsorted(cum, 0.25 * cum[-1]), len(srt) - 1)])
+    k_top = min(k_max, 2 * np.pi / (SAMPLES_PER_PERIOD * q_step))
     dk = max(0.5 / revs, 0.02)  # half the Rayleigh resolution 1/revs
     dk = max(dk, k_top / max_points)
     orders = np.arange(0.5, k_top + dk / 2, dk)
@@ -129,9 +159,13 @@ def analyse_orders(r: np.ndarray, theta: np.ndarray, variable: str, *, modulator
     if len(orders) == 0:
         return OrderSpectrum(variable, modulator_name, orders, np.zeros(0), 0.0, [], revs)
     x = r if modulator is None else r * modulator
-    amp = order_spectrum(x, theta, orders, angle_weights(theta, segment))
-    peaks, floor = find_peaks(orders, amp, ratio=ratio, max_peaks=max_peaks, revs=revs)
-    return OrderSpectrum(variable, modulator_name, orders, amp, floor, peaks, revs)
+    amp, se = order_spectrum(x, theta, orders, angle_weights(theta, segment), return_se=True)
+    # lines on the amplitude in units of its own noise level (orders of unequal support), reported in N*m
+    se0 = float(np.min(se)) if np.isfinite(se).any() else 1.0
+    scale = np.where(np.isfinite(se), se / se0, np.inf)
+    rel = np.where(np.isfinite(scale), amp / np.where(np.isfinite(scale), scale, 1.0), 0.0)
+    peaks, floor = find_peaks(orders, rel, ratio=ratio, max_peaks=max_peaks, revs=revs)
+    return OrderSpectrum(variable, modulator_name, orders, amp, floor, peaks, revs, scale)
 
 
 def binned(x: np.ndarray, y: np.ndarray, bins: int = 40) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
