@@ -107,10 +107,17 @@ def _finite_number(x: Any, what: str) -> float:
     return v
 
 
-def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
+#: how deep products and sums may nest (discovery's deepest is 3: a harmonic times a sum of products); a model file
+#: nested deeper is refused by name, not by Python's recursion limit
+MAX_BASIS_DEPTH = 16
+
+
+def validate_basis(spec: Mapping[str, Any], where: str = "basis", _depth: int = 0) -> None:
     """Raise ``ValueError`` naming ``where`` and the problem if ``spec`` is malformed."""
     if not isinstance(spec, Mapping):
         raise ValueError(f"{where}: a basis spec must be a dict, got {type(spec).__name__}")
+    if _depth > MAX_BASIS_DEPTH:
+        raise ValueError(f"{where}: products and sums nested deeper than {MAX_BASIS_DEPTH} levels")
     op = spec.get("op")
     if op not in BASIS_OPS:
         raise ValueError(f"{where}: unknown basis op {op!r}; one of {BASIS_OPS}")
@@ -121,7 +128,7 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
         if not isinstance(factors, list) or not factors:
             raise ValueError(f"{where}: 'prod' needs a non-empty list 'factors'")
         for i, f in enumerate(factors):
-            validate_basis(f, f"{where}.factors[{i}]")
+            validate_basis(f, f"{where}.factors[{i}]", _depth + 1)
         return
     if op == "sum":
         parts, weights = spec.get("terms"), spec.get("weights")
@@ -132,7 +139,7 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis") -> None:
             raise ValueError(f"{where}: 'sum' needs one number in 'weights' per spec in 'terms' ({len(parts)}), got {n}")
         for i, (f, w) in enumerate(zip(parts, weights)):
             _finite_number(w, f"{where}.weights[{i}]")
-            validate_basis(f, f"{where}.terms[{i}]")
+            validate_basis(f, f"{where}.terms[{i}]", _depth + 1)
         return
     if not isinstance(spec.get("var"), str) or not spec["var"]:
         raise ValueError(f"{where}: op {op!r} needs a signal name in 'var'")

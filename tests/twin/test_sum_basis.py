@@ -44,3 +44,16 @@ def test_sum_in_torch():
 def test_malformed_sums_are_rejected_naming_the_problem(bad, what):
     with pytest.raises(ValueError, match=what):
         validate_basis(bad, "law")
+
+
+def test_nesting_beyond_the_limit_is_refused_by_name():
+    from hd_twin.terms import MAX_BASIS_DEPTH
+
+    spec = {"op": "var", "var": "w"}
+    for i in range(MAX_BASIS_DEPTH):
+        spec = {"op": "sum", "terms": [spec], "weights": [1.0]} if i % 2 else {"op": "prod", "factors": [spec]}
+    validate_basis(spec)  # at the limit: fine
+    for _ in range(5000):  # a hostile model file: far beyond Python's recursion limit
+        spec = {"op": "prod", "factors": [spec]}
+    with pytest.raises(ValueError, match="nested deeper than"):
+        validate_basis(spec, "model.json")
