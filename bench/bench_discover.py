@@ -80,7 +80,7 @@ CASES = [
          expect=(("tau_m", "load_dependent_friction", "Q_red", None),), tested=False,
          note="default mu_flank: found alone with the right c_L, but the error cannot halve: the effect (~0.3 N*m) is near the residual floor (0.23 N*m); larger mu_flank drives the simulated mesh beyond |Q_red|-proportional friction (0.2: held-out RMSE 1.9 N*m, not found)"),
     Case("cogging_torque", ("cogging_torque",), {}, expect=(("tau_m", "cogging_torque", "theta_m", 60.0),),
-         tested=False, note="order 60 above the angle-domain Nyquist order of 1 kHz logs at speed"),
+         tested=False, note="order 60 above the angle-domain Nyquist order of 1 kHz logs at speed; searched on the slower rows since the thirty-seventh pass (found on the smooth-cubic family, amplitude low: the rotor takes the ripple)"),
 ]
 CASE_BY_ID = {c.id: c for c in CASES}
 
@@ -185,6 +185,13 @@ def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -
             tc = P["T_C"] * np.exp(-P["nu_beta"] * P["n_c"] * (T - P["T_ref"]))
             slope = float(np.polyfit(T, tc, 1)[0])
             add("dT_C/dT [N*m/K]", pr["dT_C_dT"], slope, 0.25)
+        elif name == "cogging_torque":
+            # T_cog = C1 sin(N_c theta_m + phi_c1) + ..., subtracted from the motor's torque: the logged torque carries
+            # it as + C1 sin(N_c theta_m + phi_c1)
+            ks = f"{int(e['order'])}" if float(e["order"]).is_integer() else f"{e['order']:g}"
+            if f"A_{ks}" in pr and float(e["order"]) == float(P["N_c"]):
+                add(f"A_{ks} [N*m]", pr[f"A_{ks}"], P["C1"], 0.25)
+                add(f"phase_{ks} [rad]", pr[f"phase_{ks}"], P["phi_c1"], 0.10, phase=True)
         elif name == "current_ripple":
             # T_e = k_t i_q (1 + r6 cos(6 p theta_m + phi_r6)) against the logged k_t i_q: the logged torque's ripple is
             # -k_t r6 i_q cos(.) = k_t r6 i_q sin(. - pi/2); k_t the plant's (motor_thermal_drift off)

@@ -3,8 +3,8 @@
 The order spectrum's grid used to end at the order the 95th-percentile angle step samples 4 times per period: on
 a 1 kHz log of a motor at 140 rad/s, order 11. A PMSM's torque ripple sits at 6 p electrical orders (30 mechanical
 for 5 pole pairs), so it was never a candidate, though the slower rows sample it well. Each order is now integrated
-over the rows that sample it (``spectrum.order_spectrum``), the grid reaches the order a quarter of the angle
-travelled resolves, and lines are judged against each order's own noise level.
+over the rows that sample it (``spectrum.order_spectrum``), the grid reaches the order whose rows still travel
+two revolutions, and lines are judged against each order's own noise level.
 
 Synthetic motor written here (numpy only, no hd_sim): the shaft torque J alpha + T_C tanh(omega / EPS) + b omega +
 Q / N is produced by k_t i_q (1 + R cos(30 theta_m + PHI)), while the drive logs tau_m = k_t i_q (PHYSICS.md's

@@ -15,8 +15,8 @@ Orders above what the fastest rows sample: an order-k line needs >= 4 samples pe
 A log at 1 kHz of a motor at 140 rad/s resolves orders up to ~11 on every row, but at 30 rad/s up to ~50: the
 torque ripple of a PMSM (6 p, 12 p electrical orders, e.g. 30 and 60 mechanical for 5 pole pairs) and other
 high-order lines are visible in the slower rows. Each order's integral therefore uses the rows that sample it
-(``k |d theta_i| <= pi / 2``), normalised by their own angle travelled, and the grid extends to the order that a
-quarter of the angle travelled still resolves. Lines are found on the amplitude divided by its white-noise
+(``k |d theta_i| <= pi / 2``), normalised by their own angle travelled, and the grid extends to the order whose
+rows still travel two revolutions (``LINE_REVOLUTIONS``, the angle a periodicity needs). Lines are found on the amplitude divided by its white-noise
 standard error, sqrt(sum w_i^2) / sum w_i (unit residual variance): an order seen by fewer rows is noisier, and a
 floor taken over orders of unequal support would call its noise a line.
 """
@@ -55,6 +55,8 @@ def angle_weights(theta: np.ndarray, segment: np.ndarray | None = None) -> np.nd
 
 #: samples per period an order needs in a row for that row to enter its integral (k |d theta| <= 2 pi / this)
 SAMPLES_PER_PERIOD = 4.0
+#: revolutions of angle travelled an order's own rows must cover for the grid to reach that order
+LINE_REVOLUTIONS = 2.0
 
 
 def order_spectrum(
@@ -107,15 +109,22 @@ def order_grid(theta: np.ndarray, *, k_max: float = 200.0, max_points: int = 300
     step = step[step > 0]
     if revs < 1.0 or len(step) == 0:
         return np.zeros(0), revs
-    # Nyquist in the angle domain, with margin: 4 samples per period (SAMPLES_PER_PERIOD) on the rows that carry a
-    # quarter of the angle travelled (the slowest ones: each order is integrated over the rows that sample it)
+    # Nyquist in the angle domain, with margin: 4 samples per period (SAMPLES_PER_PERIOD), up to the order whose
+    # rows (those that sample it so, the slowest first: each order is integrated over its own rows) still travel
+    # LINE_REVOLUTIONS revolutions, the angle a periodicity needs to be told from a trend (discovery's rule for
+    # position-periodic candidates)
     srt = np.sort(step)
     cum = np.cumsum(srt)
-    q_step = float(srt[min(np.searchsorted(cum, 0.25 * cum[-1]), len(srt) - 1)])
-    k_top = min(k_max, 2 * np.pi / (SAMPLES_PER_PERIOD * q_step))
+    need = LINE_REVOLUTIONS * 2 * np.pi
+    s_step = float(srt[min(np.searchsorted(cum, need), len(srt) - 1)]) if cum[-1] >= need else float(srt[-1])
+    k_top = min(k_max, 2 * np.pi / (SAMPLES_PER_PERIOD * s_step))
     dk = max(0.5 / revs, 0.02)  # half the Rayleigh resolution 1/revs
     dk = max(dk, k_top / max_points)
     orders = np.arange(0.5, k_top + dk / 2, dk)
+    # the integer orders on the grid too: where the grid is coarser than a line's width (1 / revs; the point cap on a
+    # high top), a line between two grid points would lose up to all of its amplitude, and physical lines sit at
+    # integer orders of their angle
+    orders = np.unique(np.concatenate([orders, np.arange(1.0, np.floor(k_top) + 1.0)]))
     return orders, revs
 
 
