@@ -31,11 +31,11 @@ no real logger sees that. Reported to the simulator's owner.
 import argparse
 import json
 import math
-from types import SimpleNamespace
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -141,6 +141,8 @@ def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -
     simulator (PHYSICS.md): tau_m = ... + T_fric + T_pos (both as A sin(k theta_m + phase)), and
     the kinematic error enters the output torque as K theta_KE with theta_KE = A2 sin(2 theta_m + psi2).
     """
+    from hd_ground.discovery.library import _kstr
+
     P = truth["params"]
     found: dict = {}
     for e in rep["effects"]:  # best first: the first entry of a key is its main term
@@ -188,14 +190,14 @@ def parameter_checks(case: Case, rep: dict, truth: dict, fit_paths: list[str]) -
         elif name == "cogging_torque":
             # T_cog = C1 sin(N_c theta_m + phi_c1) + ..., subtracted from the motor's torque: the logged torque carries
             # it as + C1 sin(N_c theta_m + phi_c1)
-            ks = f"{int(e['order'])}" if float(e["order"]).is_integer() else f"{e['order']:g}"
+            ks = _kstr(e["order"])
             if f"A_{ks}" in pr and float(e["order"]) == float(P["N_c"]):
                 add(f"A_{ks} [N*m]", pr[f"A_{ks}"], P["C1"], 0.25)
                 add(f"phase_{ks} [rad]", pr[f"phase_{ks}"], P["phi_c1"], 0.10, phase=True)
         elif name == "current_ripple":
             # T_e = k_t i_q (1 + r6 cos(6 p theta_m + phi_r6)) against the logged k_t i_q: the logged torque's ripple is
             # -k_t r6 i_q cos(.) = k_t r6 i_q sin(. - pi/2); k_t the plant's (motor_thermal_drift off)
-            ks = f"{int(e['order'])}" if float(e["order"]).is_integer() else f"{e['order']:g}"
+            ks = _kstr(e["order"])
             add(f"k_t r_{ks} [N*m/A]", pr[f"k_t_r_{ks}"], P["k_t"] * P["r6"], 0.25)
             add(f"phase_{ks} [rad]", pr[f"phase_{ks}"], P["phi_r6"] - math.pi / 2, 0.10, phase=True)
         elif name == "load_dependent_friction":

@@ -487,8 +487,7 @@ def _shape_rows(fit: np.ndarray, max_rows: int = 24000) -> np.ndarray:
     return out
 
 
-def _lstsq(X, y):
-    return scaled_lstsq(X, y)
+_lstsq = scaled_lstsq  # the name this module's callers (and the bench's diagnoses) use
 
 
 def _paired_t(sse_a: np.ndarray, sse_b: np.ndarray) -> float:

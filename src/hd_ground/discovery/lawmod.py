@@ -29,9 +29,9 @@ from __future__ import annotations
 import numpy as np
 
 from hd_twin.identify import scaled_lstsq
-from hd_twin.terms import basis_matrix, harmonic_amplitude_phase
+from hd_twin.terms import basis_matrix, children, harmonic_amplitude_phase
 
-from .library import Candidate
+from .library import Candidate, _kstr
 
 #: alternating least-squares rounds (the ripple is a few % of the law: the law's weights settle in two or three)
 ALS_ROUNDS = 4
@@ -52,8 +52,8 @@ def is_linear_stiffness_ripple(cand: Candidate) -> bool:
 
 
 def _twist_only(b: dict) -> bool:
-    if b.get("op") == "prod":
-        return all(_twist_only(f) for f in b["factors"])
+    if children(b):
+        return all(_twist_only(f) for f in children(b))
     return b.get("var") == "windup" and b.get("op") in ("var", "pow", "deadzone")
 
 
@@ -102,9 +102,9 @@ def refine_stiffness_modulation(cand: Candidate, Xo: np.ndarray, law_pos: list[i
         return False, []
     H = basis_matrix(_harmonics(cand), rows_sig)
     law = Xo[:, law_pos]
-    lin = basis_matrix(cand.basis, rows_sig)
+    X_lin = np.column_stack([Xo, basis_matrix(cand.basis, rows_sig)])
     every = np.ones(len(y), bool)
-    c_lin = scaled_lstsq(np.column_stack([Xo, lin]), y)
+    c_lin = scaled_lstsq(X_lin, y)
     w_hat, coef = _als(y, Xo, law, H, law_pos, every, c_lin[law_pos])
     e_s, e_c = coef[-2:]
     eps, psi = harmonic_amplitude_phase(e_s, e_c)
@@ -112,7 +112,6 @@ def refine_stiffness_modulation(cand: Candidate, Xo: np.ndarray, law_pos: list[i
     blocks, inv = np.unique(block, return_inverse=True)
     r_lin = np.empty_like(y)
     r_mod = np.empty_like(y)
-    X_lin = np.column_stack([Xo, lin])
     for b in range(len(blocks)):
         tr, te = inv != b, inv == b
         c = scaled_lstsq(X_lin[tr], y[tr])
@@ -122,14 +121,13 @@ def refine_stiffness_modulation(cand: Candidate, Xo: np.ndarray, law_pos: list[i
     sse_l, sse_m = np.bincount(inv, r_lin**2), np.bincount(inv, r_mod**2)
     gain = float((sse_l.sum() - sse_m.sum()) / sse_l.sum()) if sse_l.sum() > 0 else 0.0
     folds = float(np.mean(sse_m < sse_l))
-    k = cand.order
-    ks = f"{int(k)}" if float(k).is_integer() else f"{k:g}"
+    ks = _kstr(cand.order)
     head = (f"position-dependent stiffness (order {ks}) read on the identified torsion law "
             f"({len(law_pos)} law columns; alternating least squares, leave-one-block-out residuals with the law "
             f"refitted per fold, {len(y)} rows): eps_{ks} = {eps:.3g} of the law, CV error {-gain:+.1%} against "
             f"the linear ripple K eps w, lower in {folds:.0%} of the blocks")
-    cand.nonlinear["law_modulation_tried"] = float(eps)
     if gain < min_gain or folds < fold_majority:
+        cand.nonlinear["law_modulation_tried"] = float(eps)
         why = f"CV gain {gain:.1%} < {min_gain:.0%}" if gain < min_gain else \
             f"lower in {folds:.0%} of the blocks < {fold_majority:.0%}"
         return False, [f"{head}: the linear ripple is kept ({why})"]
@@ -137,7 +135,6 @@ def refine_stiffness_modulation(cand: Candidate, Xo: np.ndarray, law_pos: list[i
     cand.basis = basis
     cand.level_carrier = dict(basis[0]["factors"][1])
     cand.nonlinear["law_modulated"] = 1.0
-    cand.nonlinear.pop("law_modulation_tried", None)
 
     def to_parameters(c, ks=ks):
         a, p = harmonic_amplitude_phase(c[0], c[1])

@@ -16,9 +16,9 @@ A log at 1 kHz of a motor at 140 rad/s resolves orders up to ~11 on every row, b
 torque ripple of a PMSM (6 p, 12 p electrical orders, e.g. 30 and 60 mechanical for 5 pole pairs) and other
 high-order lines are visible in the slower rows. Each order's integral therefore uses the rows that sample it
 (``k |d theta_i| <= pi / 2``), normalised by their own angle travelled, and the grid extends to the order whose
-rows still travel two revolutions (``LINE_REVOLUTIONS``, the angle a periodicity needs). Lines are found on the amplitude divided by its white-noise
-standard error, sqrt(sum w_i^2) / sum w_i (unit residual variance): an order seen by fewer rows is noisier, and a
-floor taken over orders of unequal support would call its noise a line.
+rows still travel two revolutions (``LINE_REVOLUTIONS``, the angle a periodicity needs). Lines are found on the
+amplitude divided by its white-noise standard error, sqrt(sum w_i^2) / sum w_i (unit residual variance): an order
+seen by fewer rows is noisier, and a floor taken over orders of unequal support would call its noise a line.
 """
 
 from __future__ import annotations
