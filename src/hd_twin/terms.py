@@ -51,6 +51,10 @@ spec                                              value
                                                   a twist s, a compliant first contact); s -> 0 gives the hard one
 ``{"op": "within", "var": v, "width": d}``        1 where abs(v) < d, 0 where abs(v) > d (1/2 at d): inside that lost
                                                   motion, no contact (1 - the dead zone's slope)
+``{"op": "lowpass", "var": v, "k": k,              1 / (1 + (k v / c)^2): the share of a disturbance at the frequency
+   "corner": c}``                                 k |v| [rad/s] that a band-limited loop shows, corner c (e.g. a
+                                                  ripple of order k in theta_m at speed v = omega_m in the logged
+                                                  current: beyond the speed loop's band the rotor's inertia takes it)
 ``{"op": "prod", "factors": [spec, ...]}``        product of the factors
 ``{"op": "sum", "terms": [spec, ...],              sum_i w_i spec_i: a fixed function made of others (e.g. an
    "weights": [w, ...]}``                         identified torsion law inside a product, its weights fixed)
@@ -90,7 +94,7 @@ CATALOG_NAMES = (
 )
 TARGET_SIGNALS = ("tau_m", "Q_red")
 BASIS_OPS = ("const", "var", "sin", "cos", "sgn", "abs", "pow", "offset", "stribeck", "exp_decay", "deadzone", "within",
-             "expm1", "prod", "sum")
+             "expm1", "lowpass", "prod", "sum")
 
 # ---------------------------------------------------------------------------
 # validation
@@ -169,6 +173,10 @@ def validate_basis(spec: Mapping[str, Any], where: str = "basis", _depth: int = 
             raise ValueError(f"{where}: {op} needs width >= 0, got {spec.get('width')}")
         if op == "deadzone" and "edge" in spec and _finite_number(spec.get("edge"), f"{where}: 'edge' of deadzone") < 0:
             raise ValueError(f"{where}: deadzone needs edge >= 0, got {spec.get('edge')}")
+    elif op == "lowpass":
+        _finite_number(spec.get("k"), f"{where}: 'k' of lowpass")
+        if _finite_number(spec.get("corner"), f"{where}: 'corner' of lowpass") <= 0:
+            raise ValueError(f"{where}: lowpass needs corner > 0, got {spec.get('corner')}")
     elif op in ("stribeck", "exp_decay"):
         s = _finite_number(spec.get("v_s"), f"{where}: 'v_s' of {op}")
         d = _finite_number(spec.get("delta", 1.0), f"{where}: 'delta' of {op}")
@@ -303,6 +311,9 @@ def evaluate_basis(spec: Mapping[str, Any], signals: Mapping[str, Any], xp=np, w
         return xp.sign(x) * (a + xp.abs(a)) / 2
     if op == "within":
         return (1.0 - xp.sign(xp.abs(x) - float(spec["width"]))) / 2
+    if op == "lowpass":
+        z = float(spec["k"]) * x / float(spec["corner"])
+        return 1.0 / (1.0 + z * z)
     if op in ("stribeck", "exp_decay"):
         s, d = float(spec["v_s"]), float(spec.get("delta", 1.0))
         decay = xp.exp(-((xp.abs(x) / s) ** d))
