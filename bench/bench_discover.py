@@ -305,7 +305,7 @@ FAMILY_EFFECTS = {
     "motor_thermal_drift": ({}, ("tau_m", "motor_thermal_drift", "temperature", None)),
 }
 #: family effects without a simulator case whose parameters ``parameter_checks`` compares all the same
-FAMILY_PARAM_CHECKS = ("current_ripple",)
+FAMILY_PARAM_CHECKS = ("current_ripple", "cogging_torque")
 DEFAULT_FAMILY_EFFECTS = ("position_periodic_torque", "stribeck_friction", "kinematic_error_harmonic")
 #: discover's (and greedy's) acceleration derivative window (--alpha-window, core.choose_alpha_window): "identify"
 #: (the default: moved off 20 ms only when identified on the fit bags), "timing" (20 ms + the timing column) or

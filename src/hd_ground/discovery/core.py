@@ -202,6 +202,9 @@ class Options:
     # a selected linear stiffness ripple beside a nonlinear torsion law is read on that law (lawmod), when the fit
     # blocks' CV prefers it; False: the linear ripple K eps w only (the behaviour before the thirty-sixth pass)
     stiffness_law_modulation: bool = True
+    # a motor-angle ripple of the motor torque is also offered as seen through the drive's band (library._band_limited:
+    # 1 / (1 + (k omega_m / omega_b)^2), omega_b identified); False: the plain harmonic only (before the 38th pass)
+    band_limited_ripple: bool = True
 
 
 @dataclass
@@ -793,6 +796,8 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
                     or not _premise_holds(gram, cur_idx, groups, selected, getattr(cand, "needs_positive", None)) \
                     or not _shape_premise_holds(groups, selected, getattr(cand, "needs_shape", None)):
                 continue
+            if getattr(cand, "screened", False) and not any(_paired_t(cur, e) >= 1.0 for _, e in per_fam.get(cand.family, [])):
+                continue  # a shaped refinement of the family's plain reading, asked where that one lowers the CV (1 SE)
             if cand.shapes and reshape is not None and not reshape(gi, cur_idx):
                 continue
             if not _beyond_holds(groups, selected, gi):
@@ -1716,7 +1721,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         short_stroke={v: (float(np.median(sf[v])), float(np.ptp(sf[v]) / 2), float(np.min(sf[v])), float(np.max(sf[v])))
                       for v in ("theta_m", "theta_f")
                       if v in avail and v in excluded and np.ptp(sf[v]) > 0 and "omega_m" not in excluded},
-        angle_skew=float(getattr(ds, "angle_skew", 0.0)),
+        angle_skew=float(getattr(ds, "angle_skew", 0.0)), band_limited=opt.band_limited_ripple,
     )
     if "windup" in avail:
         wu = sf["windup"]
@@ -2175,43 +2180,51 @@ def _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi):
     return design_of
 
 
-def _refine_selected(sel, groups, base_idx, X_all, srows, s_rows, y, block, statements, trace, _apply_basis, applies,
-                     refine, step: str, keys: tuple[str, ...]) -> bool:
+def _refine_selected(sel, groups, statements, trace, _apply_basis, applies, refine, step: str, record) -> bool:
     """A law-shape step over every selected group it ``applies`` to, each given the other selected groups:
-    ``refine(cand, design_of, y, block) -> (replaced, statements)``; a group whose law was replaced has its columns
-    rebuilt (``_apply_basis``) and a trace record ``step`` with its ``keys``. True when one was replaced."""
+    ``refine(gi, cand) -> (replaced, statements)``, or None where the step has nothing to read; a group whose law was
+    replaced has its columns rebuilt (``_apply_basis``) and a trace record ``step`` with ``record(gi, cand)`` (a dict
+    of what the step identified). True when one was replaced."""
     changed = False
     for gi in sel:
         cand = groups[gi][0]
         if not applies(cand):
             continue
-        design_of = _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi)
-        ok_, st = refine(cand, design_of, y[srows], block[srows])
+        got = refine(gi, cand)
+        if got is None:
+            continue
+        ok_, st = got
         statements += st
         if ok_:
             _apply_basis(gi)
-            trace.append({"step": step, "candidate": f"{cand.name}[{cand.family}]"}
-                         | {k: cand.nonlinear[k] for k in keys})
+            trace.append({"step": step, "candidate": f"{cand.name}[{cand.family}]"} | record(gi, cand))
             changed = True
     return changed
+
+
+def _record_shapes(*keys):
+    """``_refine_selected``'s trace record: the refined group's shape values ``keys``."""
+    return lambda gi, cand: {k: cand.nonlinear[k] for k in keys}
 
 
 def _refine_loops(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, statements, trace, _apply_basis) -> bool:
     """The loop shape of every selected twist-hysteresis group, given the other selected groups
     (``loopshape.refine_loop_shape``); True when one replaced its Dahl loop (its columns are then rebuilt)."""
-    return _refine_selected(sel, groups, base_idx, X_all, srows, s_rows, y, block, statements, trace, _apply_basis,
-                            lambda c: twist_state_of(c) is not None,
-                            lambda c, d, yy, bb: refine_loop_shape(c, d, yy, bb, opt.min_gain),
-                            "loop shape", ("n_h", "phi_h"))
+    return _refine_selected(
+        sel, groups, statements, trace, _apply_basis, lambda c: twist_state_of(c) is not None,
+        lambda gi, c: refine_loop_shape(c, _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi), y[srows],
+                                        block[srows], opt.min_gain),
+        "loop shape", _record_shapes("n_h", "phi_h"))
 
 
 def _refine_edges(sel, groups, base_idx, X_all, srows, s_rows, y, block, opt, statements, trace, _apply_basis) -> bool:
     """The edge of every selected hard dead zone, given the other selected groups
     (``edgeshape.refine_dead_zone_edge``); True when a rounded zone replaced one (its columns are then rebuilt)."""
-    return _refine_selected(sel, groups, base_idx, X_all, srows, s_rows, y, block, statements, trace, _apply_basis,
-                            is_hard_dead_zone,
-                            lambda c, d, yy, bb: refine_dead_zone_edge(c, d, yy, bb, opt.min_gain, opt.fold_majority),
-                            "edge shape", ("j", "edge_ratio"))
+    return _refine_selected(
+        sel, groups, statements, trace, _apply_basis, is_hard_dead_zone,
+        lambda gi, c: refine_dead_zone_edge(c, _design_beside(sel, groups, base_idx, X_all, srows, s_rows, gi),
+                                            y[srows], block[srows], opt.min_gain, opt.fold_majority),
+        "edge shape", _record_shapes("j", "edge_ratio"))
 
 
 def _refine_modulations(sel, groups, base_idx, cols, X_all, srows, s_rows, y, block, opt, statements, trace,
@@ -2219,30 +2232,26 @@ def _refine_modulations(sel, groups, base_idx, cols, X_all, srows, s_rows, y, bl
     """Every selected linear stiffness ripple beside a nonlinear torsion law, read on that law
     (``lawmod.refine_stiffness_modulation``): the law is the baseline's K w and the selected groups that are functions of
     the twist alone, at the model's coefficients. True when one was replaced (its columns are then rebuilt)."""
-    changed = False
-    for gi in sel:
-        cand = groups[gi][0]
-        if not is_linear_stiffness_ripple(cand):
-            continue
-        laws = [gj for gj in sel if gj != gi and is_torsion_law(groups[gj][0])]
-        base_k = [j for j in base_idx if cols[j].param == "K"]
+    base_k = [j for j in base_idx if cols[j].param == "K"]
+
+    def laws_of(gi):
+        return [gj for gj in sel if gj != gi and is_torsion_law(groups[gj][0])]
+
+    def refine(gi, cand):
+        laws = laws_of(gi)
         if not laws or not base_k:
-            continue  # a linear law: the ripple on it is the linear ripple
+            return None  # a linear law: the ripple on it is the linear ripple
         others = [c for c in _model(base_idx, groups, [gj for gj in sel if gj != gi]) if c not in cand.replace_idx]
         law_cols = base_k + [c for gj in laws for c in groups[gj][1]]
         law_specs = [cols[j].basis for j in base_k] + [b for gj in laws for b in groups[gj][0].basis]
         if any(c not in others for c in law_cols):
-            continue
-        ok_, st = refine_stiffness_modulation(cand, X_all[srows][:, others], [others.index(c) for c in law_cols],
-                                              law_specs, s_rows, y[srows], block[srows], opt.min_gain,
-                                              opt.fold_majority)
-        statements += st
-        if ok_:
-            _apply_basis(gi)
-            trace.append({"step": "stiffness on the law", "candidate": f"{cand.name}[{cand.family}]",
-                          "law": ", ".join(f"{groups[gj][0].name}[{groups[gj][0].family}]" for gj in laws)})
-            changed = True
-    return changed
+            return None
+        return refine_stiffness_modulation(cand, X_all[srows][:, others], [others.index(c) for c in law_cols],
+                                           law_specs, s_rows, y[srows], block[srows], opt.min_gain, opt.fold_majority)
+
+    return _refine_selected(
+        sel, groups, statements, trace, _apply_basis, is_linear_stiffness_ripple, refine, "stiffness on the law",
+        lambda gi, c: {"law": ", ".join(f"{groups[gj][0].name}[{groups[gj][0].family}]" for gj in laws_of(gi))})
 
 
 def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray, omega: np.ndarray | None = None,
@@ -2290,6 +2299,14 @@ def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray,
             parts.append(f"{a * ws:.3g}..{b * ws:.3g} rad/s: {int(band.sum())} rows{acc}")
         out.append(f"{cand.name}: fit rows per octave of |omega_m| around omega_s (median |alpha_m| in rad/s^2; where "
                    "J alpha_m dwarfs the friction, the curve is carried by its law, not measured): " + "; ".join(parts))
+    if omega is not None and "omega_b" in at.shape and cand.order:
+        wb = at.shape["omega_b"]
+        w_half = wb / float(cand.order)
+        out.append(f"{cand.name} (theta_m, order {float(cand.order):g}): seen in the logged torque below the ripple "
+                   f"frequency omega_b = {wb:.3g} rad/s ({wb / (2 * np.pi):.3g} Hz, the drive's band as this ripple sees "
+                   f"it): half its amplitude at |omega_m| = {w_half:.3g} rad/s, a tenth at {3 * w_half:.3g} rad/s; "
+                   f"{int(np.sum(np.abs(omega) < w_half))} of {len(omega)} fit rows are slower than {w_half:.3g} rad/s "
+                   "(identify or compensate it there; faster, the rotor's inertia takes it)")
     return out
 
 

@@ -81,6 +81,10 @@ class Candidate:
     # that selected family's shape (e.g. a knot of the torsion law beyond the lost motion's width); else it does not
     # compete at that step
     beyond: tuple[str, str, str] | None = None
+    # competes at a forward step only where an earlier variant of its family (listed before it) lowers the CV error
+    # at that step by one paired SE of the per-block drops (t >= 1): a costly shaped refinement of a plain reading
+    # that the plain reading also partly sees
+    screened: bool = False
     # a function of a position (an angle) times this factor ({"op": "const"} for none): the group must also lower
     # the CV error with a level of the factor per block as a nuisance (core.within_block_sse), i.e. by the angle's
     # motion within blocks, not by levels between blocks where the angle stands still (None: not tested)
@@ -134,6 +138,8 @@ class LibraryContext:
     windup_dot_scale: float = 0.0  # rad/s, q90 of |w'|
     # s, the torque sample's skew after the angle's (Dataset.angle_skew): harmonics at theta + s omega (0: as logged)
     angle_skew: float = 0.0
+    # a motor-angle ripple of tau_m is also offered as seen through the drive's band (``_band_limited``)
+    band_limited: bool = True
 
 
 #: The rate of each angle (the re-timed angle theta + s omega of a position harmonic).
@@ -367,6 +373,9 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                     # nuisance that can be fitted, so the i_q variant is not tested (its ripple scales with the current)
                     level_carrier=None if variant == "iq" else dict(times) if times else {"op": "const"},
                 ))
+                if (ctx.band_limited and variant in ("plain", "iq") and ctx.target == "tau_m" and var == "theta_m"
+                        and "omega_m" in ctx.available):
+                    out.append(_band_limited(ctx, k, fam, variant, times, form + at, pname, pair, rate, skew))
             if ctx.target == "Q_red" and "windup" in ctx.available and var == "theta_m" and float(k).is_integer():
                 # load-dependent amplitude of the same ripple (e.g. the KE's A_k(1 + a_T |T|/T_rated)): an
                 # additional group in its own family, so that it can join the plain ripple, never replace it
@@ -397,6 +406,50 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
                 if ctx.windup_scale > 0:
                     out.append(_contact_ripple(ctx, var, k, fam, pair, at))
     return out
+
+
+def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, form: str, pname: str, pair,
+                  rate: str | None, skew: float) -> Candidate:
+    """The same motor-angle ripple as it shows in the logged torque of a drive whose loops have a finite band.
+
+    A torque periodic in theta_m (cogging, the drive's current ripple, any position disturbance of the motor) is a
+    disturbance at the frequency k |omega_m|. The drive's speed loop answers it with current, which the log shows as
+    tau_m = k_t i_q, only within its band; beyond it the rotor's inertia takes the ripple as a speed ripple, which the
+    encoder's differentiated and smoothed acceleration does not carry either. So the ripple a log shows fades with
+    k |omega_m|: a plain harmonic fitted over all speeds is pulled towards zero by the fast rows (where it is not
+    seen) and predicts a ripple there that is not (a held-out mission at other speeds then scores it worse). This
+    variant scales the harmonic by the share 1 / (1 + (k omega_m / omega_b)^2) of a band-limited loop, its corner
+    omega_b [rad/s of the ripple's frequency] identified by the CV profile over the ripple frequencies of the data
+    (from half the low-speed scale to twice the high-speed one, times k); it is the plain harmonic's variant in
+    the same family, so the data decide between them (an unbounded band, omega_b at the top of its range, is the
+    plain reading and leaves omega_b unidentified). The magnitude only: a phase lag that grows with speed was
+    tried and fitted worse on hd_sim's deadzone-lugre cogging (the loop's lag and the acceleration estimate's
+    filter partly cancel); the harmonic's own phase is free as in the plain reading. Its shape costs a CV profile
+    per forward step, so it competes only where the plain harmonic (or the current-proportional one), listed just
+    before it, lowers the CV error at that step by one paired SE (``screened``): the slow rows show a band-limited ripple whole, so
+    the plain reading gains there too."""
+    ks = _kstr(k)
+    lo = max(0.5 * k * ctx.omega_low, 1e-3)
+    hi = max(2.0 * k * ctx.omega_scale, 4.0 * lo)
+
+    def factor(sh):
+        lp = {"op": "lowpass", "var": "omega_m", "k": float(k), "corner": float(sh["omega_b"])}
+        return lp if times is None else {"op": "prod", "factors": [dict(times), lp]}
+
+    def basis(sh):
+        return pair(k, factor(sh))
+
+    sh0 = {"omega_b": float(np.sqrt(lo * hi))}
+    return Candidate(
+        _periodic_name(ctx.target, "theta_m", k, variant), fam, "theta_m", float(k), basis(sh0),
+        form + f" / (1 + ({ks} omega_m / omega_b)^2) (seen through the drive's band: beyond the corner omega_b of "
+        "the ripple's frequency the rotor's inertia takes it, and the logged current does not show it)",
+        _harm_params(pname, k), derived=lambda p: {"f_b_hz": p["omega_b"] / (2.0 * math.pi)},
+        requires=tuple({"theta_m", "omega_m"} | ({"i_q"} if variant == "iq" else set()) | ({rate} if skew else set())),
+        nonlinear=dict(sh0), shapes=[Shape("omega_b", lo, hi, log=True, n_grid=8)], make_basis=basis,
+        level_carrier=None if variant == "iq" else factor(sh0),
+        make_carrier=None if variant == "iq" else factor, screened=True,
+    )
 
 
 def _twist_range(ctx: LibraryContext) -> tuple[float, float]:
