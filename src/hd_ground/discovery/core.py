@@ -766,8 +766,10 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
     Candidates with nonlinear shapes: before each forward step ``reshape(gi, cur_idx)`` identifies the
     group's shape given the current model (CV profile search) and updates its columns; it returns
     False when no shape is admissible. A group is admitted only if ``confirm(gi, cur_idx)`` (the
-    shape's block-jackknife identification) returns (True, note). Families in ``closed`` are not
-    considered; a refinement (``Candidate.after``) competes only once its family is selected.
+    shape's block-jackknife identification) returns (True, note); one refused so is closed alone, and its family's
+    other variants still compete (a band-limited ripple whose corner runs onto a bound leaves the plain harmonic).
+    Families in ``closed`` are not considered; a refinement (``Candidate.after``) competes only once its family is
+    selected.
 
     ``carrier(gi)`` (the group's ``Candidate.level_carrier`` on the fit rows, or None): a group with a carrier, a
     function of a position, must also reach ``opt.min_gain`` and one paired standard error with a level of its
@@ -784,6 +786,9 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
     selected: list[int] = []  # indices into groups
     trace = [{"step": "baseline", "cv_sse": float(cur.sum())}]
     fams_used: set[str] = set(closed)
+    # variants refused for their own shape (unidentified): the family's other variants still compete (the plain
+    # harmonic after its band-limited variant's corner ran onto a bound)
+    variants_closed: set[int] = set()
     fams_skip: set[str] = set()  # inconsistent at this step only (reconsidered once the model has changed)
     step_rejected: list[int] = []  # groups that reached min_gain at this step but failed a consistency test
     while len(selected) < opt.max_effects:
@@ -791,7 +796,7 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
         per_fam: dict[str, list[tuple[int, np.ndarray]]] = {}
         fams_sel = {groups[g][0].family for g in selected}
         for gi, (cand, cols) in enumerate(groups):
-            if cand.family in fams_used or cand.family in fams_skip \
+            if cand.family in fams_used or cand.family in fams_skip or gi in variants_closed \
                     or (getattr(cand, "after", None) and cand.after not in fams_sel) \
                     or not _premise_holds(gram, cur_idx, groups, selected, getattr(cand, "needs_positive", None)) \
                     or not _shape_premise_holds(groups, selected, getattr(cand, "needs_shape", None)):
@@ -873,7 +878,9 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
                 rec["step"] = "reject (shape unidentified)"
                 rec["note"] = shape_note
                 trace.append(rec)
-                fams_used.add(cand.family)
+                variants_closed.add(gi)
+                if all(g in variants_closed for g, (c, _) in enumerate(groups) if c.family == cand.family):
+                    fams_used.add(cand.family)
                 continue
         if wald < _wald_threshold(len(tcols), opt.wald_sigmas):
             swap = confounded_swap(gram, base_idx, groups, selected, gi, cur, opt)

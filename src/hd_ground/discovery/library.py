@@ -420,16 +420,18 @@ def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, 
     seen) and predicts a ripple there that is not (a held-out mission at other speeds then scores it worse). This
     variant scales the harmonic by the share 1 / (1 + (k omega_m / omega_b)^2) of a band-limited loop, its corner
     omega_b [rad/s of the ripple's frequency] identified by the CV profile over the ripple frequencies of the data
-    (from half the low-speed scale to twice the high-speed one, times k); it is the plain harmonic's variant in
+    (k times the Stribeck speed's range at its low end, 0.05 of the low-speed scale, and twice the high-speed scale
+    at the top: a ripple seen only in the slowest rows, around the reversals, must be in range); it is the plain harmonic's variant in
     the same family, so the data decide between them (an unbounded band, omega_b at the top of its range, is the
     plain reading and leaves omega_b unidentified). The magnitude only: a phase lag that grows with speed was
-    tried and fitted worse on hd_sim's deadzone-lugre cogging (the loop's lag and the acceleration estimate's
-    filter partly cancel); the harmonic's own phase is free as in the plain reading. Its shape costs a CV profile
+    tried and left about 9 % more CV SSE on hd_sim's deadzone-lugre cogging (perhaps the loop's lag and the
+    acceleration estimate's filter partly cancel; not measured); the harmonic's own phase is free as in the plain
+    reading. Its shape costs a CV profile
     per forward step, so it competes only where the plain harmonic (or the current-proportional one), listed just
     before it, lowers the CV error at that step by one paired SE (``screened``): the slow rows show a band-limited ripple whole, so
     the plain reading gains there too."""
     ks = _kstr(k)
-    lo = max(0.5 * k * ctx.omega_low, 1e-3)
+    lo = k * max(0.05 * ctx.omega_low, 1e-3)  # the low end of the Stribeck speed's range, as a ripple frequency
     hi = max(2.0 * k * ctx.omega_scale, 4.0 * lo)
 
     def factor(sh):
@@ -446,7 +448,7 @@ def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, 
         "the ripple's frequency the rotor's inertia takes it, and the logged current does not show it)",
         _harm_params(pname, k), derived=lambda p: {"f_b_hz": p["omega_b"] / (2.0 * math.pi)},
         requires=tuple({"theta_m", "omega_m"} | ({"i_q"} if variant == "iq" else set()) | ({rate} if skew else set())),
-        nonlinear=dict(sh0), shapes=[Shape("omega_b", lo, hi, log=True, n_grid=8)], make_basis=basis,
+        nonlinear=dict(sh0), shapes=[Shape("omega_b", lo, hi, log=True, n_grid=10)], make_basis=basis,
         level_carrier=None if variant == "iq" else factor(sh0),
         make_carrier=None if variant == "iq" else factor, screened=True,
     )
