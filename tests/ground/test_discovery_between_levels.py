@@ -98,11 +98,15 @@ def test_level_carrier_of_position_groups_and_none_for_the_target_itself():
                          omega_low=1.0, sgn_eps=0.05, t_ref=25.0, orders={"theta_m": [1.0, 2.0]},
                          excluded={"theta_f", "temperature", "load"}, short_stroke={"theta_f": (0.0, 0.3)})
     pos = [c for c in build_candidates(ctx) if c.variable in ("theta_m", "theta_f")]
-    iq = [c for c in pos if any(f.get("var") == "i_q" for b in c.basis for f in b.get("factors", []))]
+    iq = [c for c in pos if "i_q" in c.requires]  # the plain i_q ripple and its band-limited variant
     assert iq and all(c.level_carrier is None for c in iq)
     rest = [c for c in pos if c not in iq]
     assert rest and all(c.level_carrier is not None for c in rest)
-    assert {"op": "const"} in [c.level_carrier for c in rest] and any(c.level_carrier.get("op") == "sgn" for c in rest)
+    assert {"op": "const"} in [c.level_carrier for c in rest]
+    assert any(isinstance(c.level_carrier, dict) and c.level_carrier.get("op") == "sgn" for c in rest)
+    # the band-limited ripple: a plain level and a level of its share per block, free together
+    band = [c for c in rest if isinstance(c.level_carrier, list)]
+    assert band and all([x["op"] for x in c.level_carrier] == ["const", "lowpass"] for c in band)
 
 
 # --- eighteenth pass: a true ripple whose within-block CV is dominated by one block (core.within_block_coefficients)

@@ -523,10 +523,15 @@ def _level_projected(gram: _BlockGram, cur_idx: list[int], trial_idx: list[int],
     for i, m in enumerate(gram._masks):
         blocks[m] = i
         c = carrier[m]
-        cc = float(c @ c)
-        if cc > 0:
-            X[m] -= np.outer(c, (c @ X[m]) / cc)
-            y[m] -= c * (float(c @ y[m]) / cc)
+        if c.ndim == 2:  # several carriers (a level of each per block): their span projected out
+            P, *_ = np.linalg.lstsq(c, np.column_stack([X[m], y[m]]), rcond=None)
+            X[m] -= c @ P[:, :-1]
+            y[m] -= c @ P[:, -1]
+        else:
+            cc = float(c @ c)
+            if cc > 0:
+                X[m] -= np.outer(c, (c @ X[m]) / cc)
+                y[m] -= c * (float(c @ y[m]) / cc)
         if still is not None and bool(np.all(still[m])):
             info[i] = False
             X[np.ix_(np.flatnonzero(m), own)] = 0.0
@@ -1814,9 +1819,11 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         spec = cand.level_carrier
         if spec is None or cand.variable not in sf:
             return None
-        key = repr(sorted(spec.items()))
+        specs = spec if isinstance(spec, list) else [spec]  # several factors: a level of each per block
+        key = repr([sorted(sp.items()) for sp in specs])
         if key not in carriers:
-            carriers[key] = basis_matrix([spec], sf)[:, 0]
+            M = basis_matrix(specs, sf)
+            carriers[key] = M if isinstance(spec, list) else M[:, 0]
         if cand.variable not in stills:
             stills[cand.variable] = still_blocks(sf[cand.variable], ds.block[fit], ds.segment[fit])
         return carriers[key], stills[cand.variable]

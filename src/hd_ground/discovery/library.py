@@ -88,7 +88,7 @@ class Candidate:
     # a function of a position (an angle) times this factor ({"op": "const"} for none): the group must also lower
     # the CV error with a level of the factor per block as a nuisance (core.within_block_sse), i.e. by the angle's
     # motion within blocks, not by levels between blocks where the angle stands still (None: not tested)
-    level_carrier: dict | None = None
+    level_carrier: dict | list | None = None  # a list of specs: a level of each per block, free together
     # the level carrier at a shape, for a group whose factor has a shape parameter (``set_shape`` rebuilds it)
     make_carrier: Callable[[dict], dict] | None = field(repr=False, default=None)
     # parameters derived from the named ones and the shapes (e.g. db/dT of a law with an identified exponent)
@@ -438,6 +438,13 @@ def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, 
         lp = {"op": "lowpass", "var": "omega_m", "k": float(k), "corner": float(sh["omega_b"])}
         return lp if times is None else {"op": "prod", "factors": [dict(times), lp]}
 
+    def carriers(sh):
+        # where theta_m stands (nearly) still, the ripple is a level times its share: a level of the share per block,
+        # and a plain level besides, since a parked, dithering drive's share follows the dither speed and a level
+        # per block (a per-mission offset) is then a ripple with a low corner in every parked block (a tests'
+        # synthetic: parked missions at different angles, order 3 with omega_b 11 rad/s took their offsets)
+        return [{"op": "const"}, factor(sh)]
+
     def basis(sh):
         return pair(k, factor(sh))
 
@@ -449,8 +456,8 @@ def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, 
         _harm_params(pname, k), derived=lambda p: {"f_b_hz": p["omega_b"] / (2.0 * math.pi)},
         requires=tuple({"theta_m", "omega_m"} | ({"i_q"} if variant == "iq" else set()) | ({rate} if skew else set())),
         nonlinear=dict(sh0), shapes=[Shape("omega_b", lo, hi, log=True, n_grid=10)], make_basis=basis,
-        level_carrier=None if variant == "iq" else factor(sh0),
-        make_carrier=None if variant == "iq" else factor, screened=True,
+        level_carrier=None if variant == "iq" else carriers(sh0),
+        make_carrier=None if variant == "iq" else carriers, screened=True,
     )
 
 
