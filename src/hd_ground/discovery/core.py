@@ -806,7 +806,8 @@ def select_groups(gram: _BlockGram, base_idx: list[int], groups: list[tuple[Cand
                     or not _premise_holds(gram, cur_idx, groups, selected, getattr(cand, "needs_positive", None)) \
                     or not _shape_premise_holds(groups, selected, getattr(cand, "needs_shape", None)):
                 continue
-            if getattr(cand, "screened", False) and not any(_paired_t(cur, e) >= 1.0 for _, e in per_fam.get(cand.family, [])):
+            if getattr(cand, "screened", False) \
+                    and not any(_paired_t(cur, e) >= 1.0 for _, e in per_fam.get(cand.family, [])):
                 continue  # a shaped refinement of the family's plain reading, asked where that one lowers the CV (1 SE)
             if cand.shapes and reshape is not None and not reshape(gi, cur_idx):
                 continue
@@ -2317,8 +2318,9 @@ def shape_uncertainty(cand: Candidate, design, y: np.ndarray, block: np.ndarray,
         wb = at.shape["omega_b"]
         w_half = wb / float(cand.order)
         out.append(f"{cand.name} (theta_m, order {float(cand.order):g}): seen in the logged torque below the ripple "
-                   f"frequency omega_b = {wb:.3g} rad/s ({wb / (2 * np.pi):.3g} Hz, the drive's band as this ripple sees "
-                   f"it): half its amplitude at |omega_m| = {w_half:.3g} rad/s, a tenth at {3 * w_half:.3g} rad/s; "
+                   f"frequency omega_b = {wb:.3g} rad/s ({wb / (2 * np.pi):.3g} Hz, the drive's band as this ripple "
+                   f"sees it): half its amplitude at |omega_m| = {w_half:.3g} rad/s, a tenth at "
+                   f"{3 * w_half:.3g} rad/s; "
                    f"{int(np.sum(np.abs(omega) < w_half))} of {len(omega)} fit rows are slower than {w_half:.3g} rad/s "
                    "(identify or compensate it there; faster, the rotor's inertia takes it)")
     return out

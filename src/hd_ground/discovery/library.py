@@ -90,7 +90,7 @@ class Candidate:
     # motion within blocks, not by levels between blocks where the angle stands still (None: not tested)
     level_carrier: dict | list | None = None  # a list of specs: a level of each per block, free together
     # the level carrier at a shape, for a group whose factor has a shape parameter (``set_shape`` rebuilds it)
-    make_carrier: Callable[[dict], dict] | None = field(repr=False, default=None)
+    make_carrier: Callable[[dict], dict | list] | None = field(repr=False, default=None)
     # parameters derived from the named ones and the shapes (e.g. db/dT of a law with an identified exponent)
     derived: Callable[[dict], dict] | None = field(repr=False, default=None)
 
@@ -414,22 +414,24 @@ def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, 
 
     A torque periodic in theta_m (cogging, the drive's current ripple, any position disturbance of the motor) is a
     disturbance at the frequency k |omega_m|. The drive's speed loop answers it with current, which the log shows as
-    tau_m = k_t i_q, only within its band; beyond it the rotor's inertia takes the ripple as a speed ripple, which the
-    encoder's differentiated and smoothed acceleration does not carry either. So the ripple a log shows fades with
-    k |omega_m|: a plain harmonic fitted over all speeds is pulled towards zero by the fast rows (where it is not
-    seen) and predicts a ripple there that is not (a held-out mission at other speeds then scores it worse). This
-    variant scales the harmonic by the share 1 / (1 + (k omega_m / omega_b)^2) of a band-limited loop, its corner
-    omega_b [rad/s of the ripple's frequency] identified by the CV profile over the ripple frequencies of the data
-    (k times the Stribeck speed's range at its low end, 0.05 of the low-speed scale, and twice the high-speed scale
-    at the top: a ripple seen only in the slowest rows, around the reversals, must be in range); it is the plain harmonic's variant in
-    the same family, so the data decide between them (an unbounded band, omega_b at the top of its range, is the
-    plain reading and leaves omega_b unidentified). The magnitude only: a phase lag that grows with speed was
-    tried and left about 9 % more CV SSE on hd_sim's deadzone-lugre cogging (perhaps the loop's lag and the
-    acceleration estimate's filter partly cancel; not measured); the harmonic's own phase is free as in the plain
-    reading. Its shape costs a CV profile
-    per forward step, so it competes only where the plain harmonic (or the current-proportional one), listed just
-    before it, lowers the CV error at that step by one paired SE (``screened``): the slow rows show a band-limited ripple whole, so
-    the plain reading gains there too."""
+    tau_m = k_t i_q, only within its band; beyond it the rotor's inertia takes the ripple as a speed ripple, which
+    the encoder's differentiated and smoothed acceleration does not carry either. So the ripple a log shows fades
+    with k |omega_m|: a plain harmonic fitted over all speeds is pulled towards zero by the fast rows (where it is
+    not seen) and predicts a ripple there that is not (a held-out mission at other speeds then scores it worse).
+
+    This variant scales the harmonic by the share 1 / (1 + (k omega_m / omega_b)^2) of a band-limited loop. Its
+    corner omega_b [rad/s of the ripple's frequency] is identified by the CV profile over the ripple frequencies of
+    the data: from k times the Stribeck speed's low end (0.05 of the low-speed scale; a ripple seen only in the
+    slowest rows, around the reversals, must be in range) to twice the high-speed scale times k. It is the plain
+    harmonic's variant in the same family, so the data decide between them; an unbounded band (omega_b at the top
+    of its range) is the plain reading and leaves omega_b unidentified. The magnitude only: a phase lag that grows
+    with speed was tried and left about 9 % more CV SSE on hd_sim's deadzone-lugre cogging (perhaps the loop's lag
+    and the acceleration estimate's filter partly cancel; not measured); the harmonic's own phase is free as in the
+    plain reading.
+
+    Its shape costs a CV profile per forward step, so it competes only where the plain harmonic (or the
+    current-proportional one), listed just before it, lowers the CV error at that step by one paired SE
+    (``screened``): the slow rows show a band-limited ripple whole, so the plain reading gains there too."""
     ks = _kstr(k)
     lo = k * max(0.05 * ctx.omega_low, 1e-3)  # the low end of the Stribeck speed's range, as a ripple frequency
     hi = max(2.0 * k * ctx.omega_scale, 4.0 * lo)
@@ -439,10 +441,10 @@ def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, 
         return lp if times is None else {"op": "prod", "factors": [dict(times), lp]}
 
     def carriers(sh):
-        # where theta_m stands (nearly) still, the ripple is a level times its share: a level of the share per block,
-        # and a plain level besides, since a parked, dithering drive's share follows the dither speed and a level
-        # per block (a per-mission offset) is then a ripple with a low corner in every parked block (a tests'
-        # synthetic: parked missions at different angles, order 3 with omega_b 11 rad/s took their offsets)
+        # where theta_m stands (nearly) still the ripple is a level times its share: a level of the share per block
+        # is freed, and a plain level besides. A parked, dithering drive's share follows the dither speed, so a
+        # per-mission offset looks like a low-corner ripple in every parked block (test_discovery_between_levels:
+        # parked missions at different angles, where an order-3 ripple with omega_b = 11 rad/s took the offsets)
         return [{"op": "const"}, factor(sh)]
 
     def basis(sh):
