@@ -10,8 +10,8 @@ Synthetic motor written here (numpy only, no hd_sim): the shaft torque J alpha +
 Q / N is produced by k_t i_q (1 + R cos(30 theta_m + PHI)), while the drive logs tau_m = k_t i_q (PHYSICS.md's
 current ripple); four bags at 500 Hz, the motor at up to 15-35 rad/s (order 30 is sampled 4 times per period below
 26 rad/s only; faster, the logger's mean over its period attenuates it), logged as a drive logs them. The ripple
-must be named as current ripple at order 30 with its
-amplitude; clean data gives no position-periodic finding at all.
+must be named as current ripple at order 30 with its amplitude; clean data gives no position-periodic finding at
+all.
 """
 
 import numpy as np
