@@ -101,3 +101,25 @@ def test_cogging_seen_only_around_the_reversals_of_a_fast_drive():
     p = cog[0]["parameters"]
     assert p["omega_b_weak"] == 0.0 and p["A_60"] == pytest.approx(C, rel=0.25), p
     assert r.error_after["rmse"] < 0.97 * r.error_before["rmse"], (r.error_before, r.error_after)
+
+
+def test_cogging_beyond_the_spectrum_grid_is_found_by_the_band_line_search():
+    # five times the speeds: the rows slow enough for the angle-weighted spectrum to sample order 60 four times a
+    # period travel too little angle for its grid to reach 60 (hd_sim's default cogging at seed 100 and 17300);
+    # the band-limited line search (spectrum.band_line_scan) finds the order on the slow rows through the roll-off
+    from hd_ground.discovery.spectrum import order_grid
+
+    ds, ho = _drive(amps=tuple(5 * a for a in AMPS))
+    orders, _ = order_grid(ds.signals["theta_m"][~ho])
+    assert orders[-1] < K
+    r = discover_signal(ds, "tau_m", ho)
+    assert K in [b.order for b in r.band_lines], r.band_lines
+    cog = [e for e in r.effects if e["name"] == "cogging_torque" and e["order"] == K]
+    assert cog, (r.effects, r.cv_trace)
+    p = cog[0]["parameters"]
+    assert p["omega_b_weak"] == 0.0 and p["A_60"] == pytest.approx(C, rel=0.25), p
+    assert 0.5 * 2 * math.pi * F_W < p["omega_b"] < 4 * 2 * math.pi * F_W, p
+    assert r.error_after["rmse"] < 0.98 * r.error_before["rmse"], (r.error_before, r.error_after)
+    # without the search (the behaviour before the thirty-ninth pass) order 60 is never tried
+    off = discover_signal(ds, "tau_m", ho, opt=Options(band_line_search=False))
+    assert not [e for e in off.effects if e["variable"] == "theta_m" and e["order"] == K], off.effects

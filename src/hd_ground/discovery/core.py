@@ -13,7 +13,10 @@ plots and the report). Steps, for one measured target signal:
 3. Residual order spectra (against theta_m, theta_f; plain and times
    sgn(omega_m)) give the orders to try besides the catalog's low orders; on
    Q_red the sums and differences of the theta_m orders are tried as well (a
-   ripple through a curved torsion law, whose lines no spectrum threshold finds).
+   ripple through a curved torsion law, whose lines no spectrum threshold finds);
+   on tau_m a regression line search through the drive band's roll-off
+   (``spectrum.band_line_scan``) adds the theta_m orders that only the slow rows
+   carry, which the angle-weighted spectrum misses.
 4. Candidate groups (``library.py``) are selected by forward group selection
    with leave-one-block-out cross-validation over the fit blocks: a group is
    added only if it lowers the cross-validated error by ``min_gain`` of the
@@ -55,7 +58,7 @@ from .lawmod import is_linear_stiffness_ripple, is_torsion_law, refine_stiffness
 from .loopshape import refine_loop_shape, twist_state_of
 from .prefilter import (DERIVATIVE_SIGNALS, SHIFT_RANGE, filtered_design, shift_samples, shifted_state_var,
                         smooth_like_derivative)
-from .spectrum import OrderSpectrum, analyse_orders
+from .spectrum import BandLine, OrderSpectrum, analyse_orders, band_line_scan
 
 #: Effects the basic twin declares for each target when no twin config is given.
 DEFAULT_DECLARED = {"tau_m": ["coulomb_friction", "viscous_friction"], "Q_red": []}
@@ -205,6 +208,10 @@ class Options:
     # a motor-angle ripple of the motor torque is also offered as seen through the drive's band (library._band_limited:
     # 1 / (1 + (k omega_m / omega_b)^2), omega_b identified); False: the plain harmonic only (before the 38th pass)
     band_limited_ripple: bool = True
+    # orders of theta_m are also searched by regression through the band's roll-off (spectrum.band_line_scan: a ripple
+    # the logged torque carries only on slow rows, which the angle-weighted spectrum misses); False: the spectrum's
+    # lines and the catalog's orders only (before the thirty-ninth pass)
+    band_line_search: bool = True
 
 
 @dataclass
@@ -229,6 +236,8 @@ class SignalResult:
     error_before: dict
     error_after: dict
     spectra: list[OrderSpectrum] = field(default_factory=list)
+    # orders of theta_m the band-limited line search found (spectrum.band_line_scan) and tried as candidates
+    band_lines: list[BandLine] = field(default_factory=list)
     cv_trace: list[dict] = field(default_factory=list)
     offsets: dict = field(default_factory=dict)  # bag name -> estimated theta_m offset (rad)
     comparisons: dict = field(default_factory=dict)
@@ -1711,6 +1720,26 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         if spectra and spectra[-1].revolutions >= 2:
             orders[var] = merge_orders(catalog_orders(var), found)
 
+    moving = np.abs(sf["omega_m"]) > 0.02 * scale
+    omega_low = float(np.quantile(np.abs(sf["omega_m"][moving]), 0.1)) if moving.any() else scale
+    band_lines: list[BandLine] = []
+    if (target == "tau_m" and opt.band_limited_ripple and opt.band_line_search and "theta_m" in orders
+            and "omega_m" in avail):
+        # a motor-angle ripple the logged torque carries only on the slow rows (the drive's band) is no line of the
+        # angle-weighted spectrum, whose grid may even end below its order: a regression line search over every
+        # integer order through the band's roll-off, at the half-share speeds of library._band_limited's range
+        band_lines, _ = band_line_scan(
+            r_base[fit], sf["theta_m"], sf["omega_m"], ds.block[fit], known=orders["theta_m"],
+            speeds=np.geomspace(max(0.05 * omega_low, 1e-3), max(2.0 * scale, 4 * max(0.05 * omega_low, 1e-3)), 10))
+        if band_lines:
+            orders["theta_m"] = merge_orders(orders["theta_m"], [b.order for b in band_lines])
+            statements.append(
+                "theta_m: " + "; ".join(
+                    f"order {b.order:g} found by the band-limited line search (CV gain {b.gain:.1%} of the baseline's "
+                    f"residual, paired t {b.t:.1f}, {b.z:.1f} robust SDs above the other orders at its half-share speed "
+                    f"{b.v_b:.3g} rad/s, over {b.revolutions:.2g} share-weighted revolutions)" for b in band_lines)
+                + ": tried as candidates (the spectrum's rows travel too fast for it to show there)")
+
     if target == "Q_red" and "windup" in avail and "theta_m" in orders:
         # a position error e(theta_m) inside a curved torsion law: Q = f(w - e) = f(w) - f'(w) e + f''(w) e^2 / 2 ...,
         # and e^2 of harmonics at orders k_i, k_j holds k_i + k_j and |k_i - k_j| (with f = K w + k3 w^3, f'' = 6 k3 w:
@@ -1724,10 +1753,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
                               f"{', '.join(map(str, ks))}: a ripple through a curved torsion law) tried as well")
 
     # 3. candidates
-    moving = np.abs(sf["omega_m"]) > 0.02 * scale
     ctx = LibraryContext(
-        target=target, available=avail, omega_scale=scale,
-        omega_low=float(np.quantile(np.abs(sf["omega_m"][moving]), 0.1)) if moving.any() else scale,
+        target=target, available=avail, omega_scale=scale, omega_low=omega_low,
         sgn_eps=sgn_eps, fric_spec=fric if isinstance(fric, dict) else None, t_ref=float(np.median(sf["temperature"])) if "temperature" in sf else 25.0,
         orders=orders, declared=set(declared), excluded=excluded,
         eps_range=(lo_eps, hi_eps) if eps_fit is not None else None,
@@ -2118,7 +2145,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     return SignalResult(
         signal=target, identifiable=True, statements=statements, declared_before=declared,
         declared_after=declared_after, baseline_params=base_params, refit_baseline_params=refit_params,
-        effects=effects, terms=terms, error_before=eb, error_after=ea, spectra=spectra, cv_trace=trace,
+        effects=effects, terms=terms, error_before=eb, error_after=ea, spectra=spectra, band_lines=band_lines,
+        cv_trace=trace,
         offsets=offsets, comparisons=comp, plot=plot, cv_folds=cv_folds, width_second_look=relook,
     )
 

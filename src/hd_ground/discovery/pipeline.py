@@ -280,6 +280,9 @@ def build_report(results: list[SignalResult], split: dict, ds: Dataset, within: 
             "width_second_look": r.width_second_look,
             "order_spectra": [{"variable": s.variable, "modulator": s.modulator, "peaks": s.peaks,
                                "floor": s.floor, "revolutions": s.revolutions} for s in r.spectra],
+            # theta_m orders found by the band-limited line search (spectrum.band_line_scan), tried as candidates
+            "band_lines": [{"order": b.order, "cv_gain": b.gain, "paired_t": b.t, "z": b.z, "v_b": b.v_b,
+                            "revolutions": b.revolutions} for b in r.band_lines],
             "within_bag": within.get(r.signal),
         })
     primary = next((p for p in per if p["identifiable"] and p["effects"]), None) or \
