@@ -581,6 +581,12 @@ def run_worlds(a) -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     fams = [f for f in (a.families.split(",") if a.families else FAMILIES) if f]
     effects = list(FAMILY_EFFECTS) if a.all else [e for e in a.family_effects.split(",") if e]
+    unknown = [f for f in fams if f not in FAMILIES] + [e for e in effects if e not in FAMILY_EFFECTS]
+    if unknown:  # before any case runs (a worker's KeyError surfaced only after the first cases' minutes)
+        print(f"bench_discover: --families / --family-effects: unknown {', '.join(unknown)} (families: "
+              f"{', '.join(FAMILIES)}; effects: {', '.join(FAMILY_EFFECTS)}; the clean case of each family always "
+              "runs)", file=sys.stderr)
+        return 2
     cases = [(f, None) for f in fams] + [(f, e) for f in fams for e in effects]
     if a.plant2:
         from tests.plants import ema2

@@ -92,3 +92,14 @@ def test_clean_data_nothing_explains_5_percent(world, family_bags, plant2_case_b
     # every signal (hysteretic-robot's Bouc-Wen twist used to leak into theta_m harmonics of Q_red)
     r = _case(world, None, family_bags, plant2_case_bags, tmp_path, signals=["tau_m", "Q_red"])
     assert r["clean_max_explained"] < 0.05, r["found"]
+
+
+def test_bench_refuses_unknown_effects_before_running(tmp_path, capsys):
+    # "clean" is no catalog effect (every family's clean case always runs): refused by name before any case, not
+    # a worker's KeyError minutes in
+    assert bd.main(["--family-effects", "clean,cogging_torque", "--no-plant2", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown clean" in err and "cogging_torque" in err
+    assert bd.main(["--families", "default,nope", "--no-plant2", "--out", str(tmp_path)]) == 2
+    assert "unknown nope" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
