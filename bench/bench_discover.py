@@ -80,7 +80,7 @@ CASES = [
          expect=(("tau_m", "load_dependent_friction", "Q_red", None),), tested=False,
          note="default mu_flank: found alone with the right c_L, but the error cannot halve: the effect (~0.3 N*m) is near the residual floor (0.23 N*m); larger mu_flank drives the simulated mesh beyond |Q_red|-proportional friction (0.2: held-out RMSE 1.9 N*m, not found)"),
     Case("cogging_torque", ("cogging_torque",), {}, expect=(("tau_m", "cogging_torque", "theta_m", 60.0),),
-         tested=False, note="order 60 above the angle-domain Nyquist order of 1 kHz logs at speed; searched on the slower rows since the thirty-seventh pass and read through the drive's band since the thirty-eighth (found on smooth-cubic, deadzone-lugre and hysteretic-robot, A_60 within 1-7 %; on default the slow rows travel too little angle for order 60)"),
+         tested=False, note="order 60 above the angle-domain Nyquist order of 1 kHz logs at speed; searched on the slower rows since the thirty-seventh pass and read through the drive's band since the thirty-eighth (found on smooth-cubic, deadzone-lugre and hysteretic-robot, A_60 within 1-7 %); on default the slow rows travel too little angle for order 60 to be on the spectrum's grid, and the band-limited line search (thirty-ninth pass) finds it there (worlds rows at seeds 100 / 17300: A_60 within 3 / 8 %)"),
 ]
 CASE_BY_ID = {c.id: c for c in CASES}
 
