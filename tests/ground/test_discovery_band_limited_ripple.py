@@ -103,7 +103,7 @@ def test_cogging_seen_only_around_the_reversals_of_a_fast_drive():
     assert r.error_after["rmse"] < 0.97 * r.error_before["rmse"], (r.error_before, r.error_after)
 
 
-def test_cogging_beyond_the_spectrum_grid_is_found_by_the_band_line_search():
+def test_cogging_beyond_the_spectrum_grid_is_found_by_the_band_line_search(tmp_path):
     # five times the speeds: the rows slow enough for the angle-weighted spectrum to sample order 60 four times a
     # period travel too little angle for its grid to reach 60 (hd_sim's default cogging at seed 100 and 17300);
     # the band-limited line search (spectrum.band_line_scan) finds the order on the slow rows through the roll-off
@@ -120,6 +120,12 @@ def test_cogging_beyond_the_spectrum_grid_is_found_by_the_band_line_search():
     assert p["omega_b_weak"] == 0.0 and p["A_60"] == pytest.approx(C, rel=0.25), p
     assert 0.5 * 2 * math.pi * F_W < p["omega_b"] < 4 * 2 * math.pi * F_W, p
     assert r.error_after["rmse"] < 0.98 * r.error_before["rmse"], (r.error_before, r.error_after)
+    # the search's CV gain per order is drawn under the order spectra, the order found marked
+    from hd_ground.discovery.plots import plot_result
+
+    assert len(r.band_scan) > 50 and max(r.band_scan, key=lambda b: b.gain).order == K
+    assert "tau_m_order_spectrum.png" in plot_result(r, tmp_path, ds)
+    assert (tmp_path / "tau_m_order_spectrum.png").stat().st_size > 0
     # without the search (the behaviour before the thirty-ninth pass) order 60 is never tried
     off = discover_signal(ds, "tau_m", ho, opt=Options(band_line_search=False))
     assert not [e for e in off.effects if e["variable"] == "theta_m" and e["order"] == K], off.effects

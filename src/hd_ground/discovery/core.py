@@ -236,8 +236,10 @@ class SignalResult:
     error_before: dict
     error_after: dict
     spectra: list[OrderSpectrum] = field(default_factory=list)
-    # orders of theta_m the band-limited line search found (spectrum.band_line_scan) and tried as candidates
+    # orders of theta_m the band-limited line search found (spectrum.band_line_scan) and tried as candidates, and its
+    # first search's best per order (for the order-spectrum plot)
     band_lines: list[BandLine] = field(default_factory=list)
+    band_scan: list[BandLine] = field(default_factory=list)
     cv_trace: list[dict] = field(default_factory=list)
     offsets: dict = field(default_factory=dict)  # bag name -> estimated theta_m offset (rad)
     comparisons: dict = field(default_factory=dict)
@@ -1723,12 +1725,13 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
     moving = np.abs(sf["omega_m"]) > 0.02 * scale
     omega_low = float(np.quantile(np.abs(sf["omega_m"][moving]), 0.1)) if moving.any() else scale
     band_lines: list[BandLine] = []
+    band_scan: list[BandLine] = []
     if (target == "tau_m" and opt.band_limited_ripple and opt.band_line_search and "theta_m" in orders
             and "omega_m" in avail):
         # a motor-angle ripple the logged torque carries only on the slow rows (the drive's band) is no line of the
         # angle-weighted spectrum, whose grid may even end below its order: a regression line search over every
         # integer order through the band's roll-off, at the half-share speeds of library._band_limited's range
-        band_lines, _ = band_line_scan(
+        band_lines, band_scan = band_line_scan(
             r_base[fit], sf["theta_m"], sf["omega_m"], ds.block[fit], known=orders["theta_m"],
             speeds=np.geomspace(max(0.05 * omega_low, 1e-3), max(2.0 * scale, 4 * max(0.05 * omega_low, 1e-3)), 10))
         if band_lines:
@@ -2146,7 +2149,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         signal=target, identifiable=True, statements=statements, declared_before=declared,
         declared_after=declared_after, baseline_params=base_params, refit_baseline_params=refit_params,
         effects=effects, terms=terms, error_before=eb, error_after=ea, spectra=spectra, band_lines=band_lines,
-        cv_trace=trace,
+        band_scan=band_scan, cv_trace=trace,
         offsets=offsets, comparisons=comp, plot=plot, cv_folds=cv_folds, width_second_look=relook,
     )
 

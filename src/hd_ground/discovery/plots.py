@@ -38,9 +38,12 @@ def plot_result(r: SignalResult, out: Path, ds: Dataset) -> list[str]:
     fig.savefig(out / fn, dpi=110)
     plt.close(fig)
     files.append(fn)
-    # order spectra
+    # order spectra, and the band-limited line search's CV gain per order below them
     if r.spectra:
-        fig, axs = plt.subplots(len(r.spectra), 1, figsize=(10, 2.6 * len(r.spectra)), squeeze=False)
+        n_ax = len(r.spectra) + (1 if r.band_scan else 0)
+        fig, axs = plt.subplots(n_ax, 1, figsize=(10, 2.6 * n_ax), squeeze=False)
+        if r.band_scan:
+            _band_scan_panel(axs[-1, 0], r)
         for a, s in zip(axs[:, 0], r.spectra):
             if len(s.orders):
                 a.semilogy(s.orders, np.maximum(s.amplitude, 1e-12), lw=0.7)
@@ -51,7 +54,8 @@ def plot_result(r: SignalResult, out: Path, ds: Dataset) -> list[str]:
             a.set_title(f"baseline residual of {sig} vs {s.variable} {('x ' + s.modulator) if s.modulator else ''}"
                         f" ({s.revolutions:.1f} rev); lines: {s.peaks}", fontsize=9)
             a.set_ylabel("amplitude [N*m]")
-        axs[-1, 0].set_xlabel("order [cycles / revolution]")
+        for a in axs[:, 0]:
+            a.set_xlabel("order [cycles / revolution]")
         fig.tight_layout()
         fn = f"{sig}_order_spectrum.png"
         fig.savefig(out / fn, dpi=110)
@@ -93,3 +97,19 @@ def plot_result(r: SignalResult, out: Path, ds: Dataset) -> list[str]:
         plt.close(fig)
         files.append(fn)
     return files
+
+
+def _band_scan_panel(a, r: SignalResult) -> None:
+    """The band-limited line search (``spectrum.band_line_scan``): per order, its leave-one-block-out CV gain on the
+    baseline residual at its best half-share speed; the orders it found marked."""
+    k = np.array([b.order for b in r.band_scan])
+    g = np.array([b.gain for b in r.band_scan]) * 100
+    o = np.argsort(k)
+    a.vlines(k[o], 0, np.maximum(g[o], 0), lw=0.8, color="C0")
+    for b in r.band_lines:
+        a.axvline(b.order, color="r", lw=0.6, alpha=0.6)
+        a.annotate(f"{b.order:g}: t {b.t:.1f}, z {b.z:.0f}, v_b {b.v_b:.3g} rad/s", (b.order, b.gain * 100),
+                   fontsize=7, color="r", xytext=(3, -10), textcoords="offset points")
+    a.set_ylabel("CV gain [% of SSE]")
+    a.set_title(f"band-limited line search on {r.signal}'s baseline residual vs theta_m (through the drive's band; "
+                f"orders found: {[b.order for b in r.band_lines]})", fontsize=9)
