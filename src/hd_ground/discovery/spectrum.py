@@ -232,14 +232,23 @@ def _band_scan(r, theta, omega, bi, nb, step, ks, sp):
     G = np.full((len(ks), len(sp)), np.nan)
     T = np.full((len(ks), len(sp)), np.nan)
     R = np.zeros((len(ks), len(sp)))
+    # the roll-off per speed, computed once (the same arithmetic as _band_pair's)
+    xl = []
+    for v in sp:
+        x = omega / v if np.isfinite(v) else None
+        xl.append((x, None if x is None else 1.0 / (1.0 + x * x)))
     for i, k in enumerate(ks):
         seen = k * step <= np.pi
         if seen.sum() < 10:
             continue
-        for jv, v in enumerate(sp):
-            L = 1.0 / (1.0 + (omega / v) ** 2) if np.isfinite(v) else 1.0
-            R[i, jv] = float(np.sum(L * step * seen) / (2 * np.pi))
-            a1, a2 = _band_pair(theta, omega, k, v, seen)
+        c, s = np.cos(k * theta) * seen, np.sin(k * theta) * seen
+        for jv, (x, L) in enumerate(xl):
+            if x is None:
+                R[i, jv] = float(np.sum(step * seen) / (2 * np.pi))
+                a1, a2 = c, s
+            else:
+                R[i, jv] = float(np.sum(L * step * seen) / (2 * np.pi))
+                a1, a2 = (c + x * s) * L, (s - x * c) * L
             g11, g12, g22 = (np.bincount(bi, a1 * a1, nb), np.bincount(bi, a1 * a2, nb), np.bincount(bi, a2 * a2, nb))
             h1, h2 = np.bincount(bi, a1 * r, nb), np.bincount(bi, a2 * r, nb)
             # leave block j out: coefficients from the other blocks' sums, the SSE on block j from its own sums
