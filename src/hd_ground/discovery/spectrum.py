@@ -238,19 +238,25 @@ def _band_scan(r, theta, omega, bi, nb, step, ks, sp):
         x = omega / v if np.isfinite(v) else None
         xl.append((x, None if x is None else 1.0 / (1.0 + x * x)))
     for i, k in enumerate(ks):
-        seen = k * step <= np.pi
-        if seen.sum() < 10:
+        # only the rows that sample the order enter its sums (the others' columns are zero: skipping them leaves every
+        # per-block sum as it is; a fast log's high orders are seen by its slow rows only)
+        idx = np.flatnonzero(k * step <= np.pi)
+        if len(idx) < 10:
             continue
-        c, s = np.cos(k * theta) * seen, np.sin(k * theta) * seen
+        full = len(idx) == len(r)
+        th, st, bk, rk = (theta, step, bi, r) if full else (theta[idx], step[idx], bi[idx], r[idx])
+        c, s = np.cos(k * th), np.sin(k * th)
         for jv, (x, L) in enumerate(xl):
             if x is None:
-                R[i, jv] = float(np.sum(step * seen) / (2 * np.pi))
+                R[i, jv] = float(np.sum(st) / (2 * np.pi))
                 a1, a2 = c, s
             else:
-                R[i, jv] = float(np.sum(L * step * seen) / (2 * np.pi))
+                if not full:
+                    x, L = x[idx], L[idx]
+                R[i, jv] = float(np.sum(L * st) / (2 * np.pi))
                 a1, a2 = (c + x * s) * L, (s - x * c) * L
-            g11, g12, g22 = (np.bincount(bi, a1 * a1, nb), np.bincount(bi, a1 * a2, nb), np.bincount(bi, a2 * a2, nb))
-            h1, h2 = np.bincount(bi, a1 * r, nb), np.bincount(bi, a2 * r, nb)
+            g11, g12, g22 = (np.bincount(bk, a1 * a1, nb), np.bincount(bk, a1 * a2, nb), np.bincount(bk, a2 * a2, nb))
+            h1, h2 = np.bincount(bk, a1 * rk, nb), np.bincount(bk, a2 * rk, nb)
             # leave block j out: coefficients from the other blocks' sums, the SSE on block j from its own sums
             G11, G12, G22, H1, H2 = (g11.sum() - g11, g12.sum() - g12, g22.sum() - g22, h1.sum() - h1, h2.sum() - h2)
             det = G11 * G22 - G12 * G12
