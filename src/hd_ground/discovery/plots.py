@@ -106,10 +106,11 @@ def _band_scan_panel(a, r: SignalResult) -> None:
     g = np.array([b.gain for b in r.band_scan]) * 100
     o = np.argsort(k)
     a.vlines(k[o], 0, np.maximum(g[o], 0), lw=0.8, color="C0")
-    for b in r.band_lines:
+    for i, b in enumerate(r.band_lines):
         a.axvline(b.order, color="r", lw=0.6, alpha=0.6)
-        a.annotate(f"{b.order:g}: t {b.t:.1f}, z {b.z:.0f}, v_b {b.v_b:.3g} rad/s", (b.order, b.gain * 100),
-                   fontsize=7, color="r", xytext=(3, -10), textcoords="offset points")
+        a.annotate(f"{b.order:g}: t {b.t:.1f}, z {b.z:.0f}, v_b {b.v_b:.3g} rad/s", (b.order, 0.9 - 0.12 * i),
+                   xycoords=("data", "axes fraction"), fontsize=7, color="r", xytext=(3, 0),
+                   textcoords="offset points")
     a.set_ylabel("CV gain [% of SSE]")
-    a.set_title(f"band-limited line search on {r.signal}'s baseline residual vs theta_m (through the drive's band; "
-                f"orders found: {[b.order for b in r.band_lines]})", fontsize=9)
+    a.set_title(f"band-limited line search on {r.signal}'s baseline residual vs theta_m, orders already tried "
+                f"projected out first and not proposed again; found: {[b.order for b in r.band_lines]}", fontsize=9)
