@@ -51,8 +51,8 @@ from hd_twin.identify import Shape, fit_separable, hysteresis_state, presliding_
 from hd_twin.terms import basis_matrix, children, evaluate_terms, with_children
 
 from .data import DEFAULT_ALPHA_WINDOW_S, DEFAULT_RETIME_WINDOW_S, Dataset, DiscoveryError, angle_resolution, with_smoothed_twist
-from .library import (STATE_PREFIX, Candidate, LibraryContext, build_candidates, catalog_orders, measured_signal,
-                      merge_orders, state_var)
+from .library import (STATE_PREFIX, Candidate, LibraryContext, band_corner_range, build_candidates, catalog_orders,
+                      measured_signal, merge_orders, state_var)
 from .edgeshape import is_hard_dead_zone, refine_dead_zone_edge
 from .lawmod import is_linear_stiffness_ripple, is_torsion_law, refine_stiffness_modulation
 from .loopshape import refine_loop_shape, twist_state_of
@@ -1733,7 +1733,7 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         # integer order through the band's roll-off, at the half-share speeds of library._band_limited's range
         band_lines, band_scan = band_line_scan(
             r_base[fit], sf["theta_m"], sf["omega_m"], ds.block[fit], known=orders["theta_m"],
-            speeds=np.geomspace(max(0.05 * omega_low, 1e-3), max(2.0 * scale, 4 * max(0.05 * omega_low, 1e-3)), 10))
+            speeds=np.geomspace(*band_corner_range(1.0, omega_low, scale), 10))
         if band_lines:
             orders["theta_m"] = merge_orders(orders["theta_m"], [b.order for b in band_lines])
             statements.append(

@@ -408,6 +408,14 @@ def periodic_candidates(ctx: LibraryContext) -> list[Candidate]:
     return out
 
 
+def band_corner_range(k: float, omega_low: float, omega_scale: float) -> tuple[float, float]:
+    """The range of a band-limited order-k ripple's corner omega_b [rad/s of the ripple's frequency]: from k times the
+    Stribeck speed's low end (0.05 of the low-speed scale ``omega_low``) to twice the high-speed scale
+    ``omega_scale`` times k. At k = 1: the half-share speeds omega_b / k (``spectrum.band_line_scan``'s)."""
+    lo = k * max(0.05 * omega_low, 1e-3)  # the low end of the Stribeck speed's range, as a ripple frequency
+    return lo, max(2.0 * k * omega_scale, 4.0 * lo)
+
+
 def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, form: str, pname: str, pair,
                   rate: str | None, skew: float) -> Candidate:
     """The same motor-angle ripple as it shows in the logged torque of a drive whose loops have a finite band.
@@ -433,8 +441,7 @@ def _band_limited(ctx: LibraryContext, k: float, fam: str, variant: str, times, 
     current-proportional one), listed just before it, lowers the CV error at that step by one paired SE
     (``screened``): the slow rows show a band-limited ripple whole, so the plain reading gains there too."""
     ks = _kstr(k)
-    lo = k * max(0.05 * ctx.omega_low, 1e-3)  # the low end of the Stribeck speed's range, as a ripple frequency
-    hi = max(2.0 * k * ctx.omega_scale, 4.0 * lo)
+    lo, hi = band_corner_range(k, ctx.omega_low, ctx.omega_scale)
 
     def factor(sh):
         lp = {"op": "lowpass", "var": "omega_m", "k": float(k), "corner": float(sh["omega_b"])}

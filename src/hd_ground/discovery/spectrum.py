@@ -214,15 +214,23 @@ BAND_LINE_T = 3.0
 BAND_LINE_Z = 5.0
 
 
+def _rolled(c: np.ndarray, s: np.ndarray, x: np.ndarray | None, L: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    """The pair cos, sin of an order's phase through a first-order roll-off at x = omega / v_b, L = 1 / (1 + x^2):
+    [(cos + x sin) L, (sin - x cos) L], i.e. amplitude 1 / sqrt(1 + x^2) and phase lag atan(x) for any coefficients
+    (x None: the plain pair)."""
+    if x is None:
+        return c, s
+    return (c + x * s) * L, (s - x * c) * L
+
+
 def _band_pair(theta: np.ndarray, omega: np.ndarray, k: float, v: float, seen: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The two columns of an order-k ripple through the roll-off 1 / (1 + (omega / v)^2) (``hd_twin.terms``'
-    ``lowpass`` of k omega at the corner k v, times the phase-lag pair), zero on the rows not ``seen``."""
+    """The two columns of an order-k ripple through the roll-off at the half-share speed v (:func:`_rolled`; v inf:
+    the plain pair), zero on the rows not ``seen``."""
     c, s = np.cos(k * theta) * seen, np.sin(k * theta) * seen
     if not np.isfinite(v):
-        return c, s
+        return _rolled(c, s, None, None)
     x = omega / v
-    L = 1.0 / (1.0 + x * x)
-    return (c + x * s) * L, (s - x * c) * L
+    return _rolled(c, s, x, 1.0 / (1.0 + x * x))
 
 
 def _band_scan(r, theta, omega, bi, nb, step, ks, sp):
@@ -232,7 +240,7 @@ def _band_scan(r, theta, omega, bi, nb, step, ks, sp):
     G = np.full((len(ks), len(sp)), np.nan)
     T = np.full((len(ks), len(sp)), np.nan)
     R = np.zeros((len(ks), len(sp)))
-    # the roll-off per speed, computed once (the same arithmetic as _band_pair's)
+    # the roll-off per speed, computed once (as _band_pair does it)
     xl = []
     for v in sp:
         x = omega / v if np.isfinite(v) else None
@@ -247,14 +255,10 @@ def _band_scan(r, theta, omega, bi, nb, step, ks, sp):
         th, st, bk, rk = (theta, step, bi, r) if full else (theta[idx], step[idx], bi[idx], r[idx])
         c, s = np.cos(k * th), np.sin(k * th)
         for jv, (x, L) in enumerate(xl):
-            if x is None:
-                R[i, jv] = float(np.sum(st) / (2 * np.pi))
-                a1, a2 = c, s
-            else:
-                if not full:
-                    x, L = x[idx], L[idx]
-                R[i, jv] = float(np.sum(L * st) / (2 * np.pi))
-                a1, a2 = (c + x * s) * L, (s - x * c) * L
+            if x is not None and not full:
+                x, L = x[idx], L[idx]
+            R[i, jv] = float(np.sum(st if x is None else L * st) / (2 * np.pi))
+            a1, a2 = _rolled(c, s, x, L)
             g11, g12, g22 = (np.bincount(bk, a1 * a1, nb), np.bincount(bk, a1 * a2, nb), np.bincount(bk, a2 * a2, nb))
             h1, h2 = np.bincount(bk, a1 * rk, nb), np.bincount(bk, a2 * rk, nb)
             # leave block j out: coefficients from the other blocks' sums, the SSE on block j from its own sums
@@ -292,7 +296,9 @@ def band_line_scan(r: np.ndarray, theta: np.ndarray, omega: np.ndarray, block: n
     ~10 rad/s is not on it (hd_sim's default cogging, ``hdphm bench discover`` seed 100).
 
     Here every integer order up to ``k_max`` is fitted to ``r`` by least squares as the pair
-    [(cos + x sin) L, (sin - x cos) L] (x = omega / v_b, L = 1 / (1 + x^2); the plain pair at v_b = inf) at each
+    [(cos + x sin) L, (sin - x cos) L] (x = omega / v_b, L = 1 / (1 + x^2): a first-order response, amplitude
+    1 / sqrt(1 + x^2) with a phase lag atan(x), not the band-limited candidate's magnitude-only share
+    1 / (1 + x^2): a search shape, falling off beyond v_b as both do; the plain pair at v_b = inf) at each
     half-share speed in ``speeds``, rows that sample the order below two samples per period left out (its aliases),
     and scored by the leave-one-block-out CV SSE over ``block``'s blocks, from per-block Gram sums (the baseline is
     not refitted: a search, not a selection). Per order, the speed is the one with the largest CV gain among those at
@@ -341,7 +347,7 @@ def band_line_scan(r: np.ndarray, theta: np.ndarray, omega: np.ndarray, block: n
                 continue
             jv = int(np.nanargmax(Gi))
             best.append(BandLine(float(k), float(G[i, jv]), float(T[i, jv]), float(Z[i, jv]), sp[jv], float(R[i, jv])))
-        if not lines and not first:
+        if not lines:  # the first search
             first = sorted(best, key=lambda b: -b.gain)
         out = [b for b in best if b.gain > 0 and b.t >= min_t and b.z >= min_z and b.order not in taken]
         if not out or len(lines) >= max_lines:
