@@ -212,6 +212,10 @@ class Options:
     # the logged torque carries only on slow rows, which the angle-weighted spectrum misses); False: the spectrum's
     # lines and the catalog's orders only (before the thirty-ninth pass)
     band_line_search: bool = True
+    # the load-dependent friction's passage through zero speed is also identified as its own (tanh(omega_m / eps_L) and
+    # a pre-sliding state at d_L, library.friction_candidates), not only taken from the baseline; False: the
+    # baseline's direction only (before the fortieth pass)
+    load_own_transition: bool = True
 
 
 @dataclass
@@ -1761,6 +1765,8 @@ def discover_signal(ds: Dataset, target: str, heldout: np.ndarray, *, declared: 
         sgn_eps=sgn_eps, fric_spec=fric if isinstance(fric, dict) else None, t_ref=float(np.median(sf["temperature"])) if "temperature" in sf else 25.0,
         orders=orders, declared=set(declared), excluded=excluded,
         eps_range=(lo_eps, hi_eps) if eps_fit is not None else None,
+        presliding_range=(d_lo, d_hi) if d_hi > d_lo else None,
+        load_own_transition=opt.load_own_transition,
         short_stroke={v: (float(np.median(sf[v])), float(np.ptp(sf[v]) / 2), float(np.min(sf[v])), float(np.max(sf[v])))
                       for v in ("theta_m", "theta_f")
                       if v in avail and v in excluded and np.ptp(sf[v]) > 0 and "omega_m" not in excluded},

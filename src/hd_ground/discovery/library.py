@@ -133,6 +133,7 @@ class LibraryContext:
     n_pole_pairs_hint: int | None = None
     short_stroke: dict[str, tuple] = field(default_factory=dict)  # angle -> (centre, half range, lo, hi) of the fit data
     eps_range: tuple[float, float] | None = None  # rad/s, search range of the friction transition width
+    presliding_range: tuple[float, float] | None = None  # rad, search range of a pre-sliding distance of theta_m
     windup_scale: float = 0.0  # rad, q90 of |w| (twist-side shape ranges)
     windup_noise: float = 0.0  # rad, white-noise sigma of w
     windup_dot_scale: float = 0.0  # rad/s, q90 of |w'|
@@ -140,6 +141,8 @@ class LibraryContext:
     angle_skew: float = 0.0
     # a motor-angle ripple of tau_m is also offered as seen through the drive's band (``_band_limited``)
     band_limited: bool = True
+    # the load-dependent friction also comes with its own identified transition (tanh width, pre-sliding distance)
+    load_own_transition: bool = True
 
 
 #: The rate of each angle (the re-timed angle theta + s omega of a position harmonic).
@@ -293,14 +296,48 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
         lambda c: {"k_t_alpha_T": float(c[0])},
         requires=("i_q", "temperature"), nonlinear={"T_ref": ctx.t_ref},
     ))
-    # Load-dependent (Coulomb share proportional to the transmitted torque).
+    # Load-dependent (Coulomb share proportional to the transmitted torque). Its passage through zero speed is the
+    # load path's own: a tooth-flank contact sliding under load, felt at the motor through the wave generator's
+    # bearing and the flexspline's compliance, is no reason to share the bearings' and seals' transition the baseline
+    # identified. So besides the baseline's direction the term comes with its own, identified as the baseline's is:
+    # tanh(omega_m / eps_L) over the baseline width's search range, and a pre-sliding state of theta_m at its own
+    # distance d_L over the baseline's range of distances (a contact that sticks and leaves its direction over a
+    # travel). The shape is a nuisance (the coefficient decides); the family keeps the variant that generalises best.
+    qabs = {"op": "abs", "var": "Q_red"}
     out.append(Candidate(
         "load_dependent_friction", "load", "Q_red", None,
-        [{"op": "prod", "factors": [{"op": "abs", "var": "Q_red"}, _sgn(ctx)]}],
+        [{"op": "prod", "factors": [dict(qabs), _sgn(ctx)]}],
         "c_L |Q_red| sgn(omega_m)",
         lambda c: {"c_L": float(c[0])},
         requires=("omega_m", "Q_red"),
     ))
+    if ctx.load_own_transition and ctx.eps_range is not None:
+        def load_tanh(sh):
+            return [{"op": "prod", "factors": [dict(qabs), {"op": "sgn", "var": "omega_m", "eps": float(sh["eps_L"])}]}]
+
+        e_l = float(np.clip(ctx.sgn_eps, *ctx.eps_range))
+        out.append(Candidate(
+            "load_dependent_friction", "load", "Q_red", None, load_tanh({"eps_L": e_l}),
+            "c_L |Q_red| tanh(omega_m / eps_L) (the load path's own transition width)",
+            lambda c: {"c_L": float(c[0])},
+            requires=("omega_m", "Q_red"), nonlinear={"eps_L": e_l},
+            shapes=[Shape("eps_L", *ctx.eps_range, log=True, n_grid=8)], nuisance=("eps_L",), make_basis=load_tanh,
+        ))
+    if (ctx.load_own_transition and ctx.presliding_range is not None
+            and ctx.presliding_range[1] > ctx.presliding_range[0]):
+        d_lo, d_hi = ctx.presliding_range
+
+        def load_state(sh):
+            return [{"op": "prod", "factors": [dict(qabs), {"op": "var", "var": state_var("theta_m", float(sh["d_L"]))}]}]
+
+        d0 = float(np.sqrt(d_lo * d_hi))
+        out.append(Candidate(
+            "load_dependent_friction", "load", "Q_red", None, load_state({"d_L": d0}),
+            "c_L |Q_red| s, s the pre-sliding state of theta_m at the load path's own distance d_L",
+            lambda c: {"c_L": float(c[0])},
+            requires=("omega_m", "Q_red", "theta_m"), nonlinear={"d_L": d0},
+            shapes=[Shape("d_L", d_lo, d_hi, log=True, n_grid=8)], nuisance=("d_L",), make_basis=load_state,
+        ))
     # Velocity-squared drag (windage, churning): outside the catalog.
     out.append(Candidate(
         "unknown", "drag", "omega_m", None,
