@@ -20,10 +20,10 @@ from hd_ground.discovery.pipeline import run_discovery
 FS, T_BAG, N_BAGS, J, T_C, EPS, B = 1000.0, 4.0, 4, 0.01, 1.0, 0.5, 0.01
 
 
-def _plant(f_motion: float, speed_noise: float, seed: int = 0, tau_a: float = 0.0):
+def _plant(f_motion: float, speed_noise: float, seed: int = 0, tau_a: float = 0.0, fs: float = FS):
     rng = np.random.default_rng(seed)
-    n = int(FS * T_BAG)
-    t = np.arange(n) / FS
+    n = int(fs * T_BAG)
+    t = np.arange(n) / fs
     ws, taus = [], []
     for i in range(N_BAGS):
         a, f = 20.0 + 3 * i, f_motion * (1 + 0.1 * i)
@@ -37,7 +37,7 @@ def _plant(f_motion: float, speed_noise: float, seed: int = 0, tau_a: float = 0.
     block = bag * 5 + np.minimum((frac * 5).astype(int), 4)
     tt = np.tile(t, N_BAGS)
     omega = np.concatenate(ws)
-    theta = np.concatenate([np.cumsum(w) / FS for w in ws])
+    theta = np.concatenate([np.cumsum(w) / fs for w in ws])
 
     def make(win, timing=False):
         sig = {"theta_m": theta, "omega_m": omega, "tau_m": np.concatenate(taus),
@@ -53,6 +53,19 @@ def test_fast_transients_get_a_shorter_acceleration_window():
     ds, note = choose_alpha_window(make, make(0.02), ho, Options())
     assert _chosen_ms(note) < 20.0, note
     assert not np.allclose(ds.signals["alpha_m"], make(0.02).signals["alpha_m"])  # the data use it
+
+
+def test_a_slow_log_is_differentiated_at_its_own_resolution():
+    # logged at 200 Hz, five samples are already 25 ms, beyond the 20 ms default: the central difference (three
+    # samples, 15 ms) is the one shorter window the log allows, and an 8 Hz motion needs it (forty-first pass)
+    make, ho = _plant(8.0, 0.01, fs=200.0)
+    ds, note = choose_alpha_window(make, make(0.02), ho, Options())
+    assert _chosen_ms(note) == pytest.approx(15.0), note
+    assert "; tried 20 ms" in note and "15 ms:" in note, note
+    # at 1 kHz five samples (5 ms) already bracket the default from below: no central difference is offered
+    make1, ho1 = _plant(12.0, 0.01)
+    note1 = choose_alpha_window(make1, make1(0.02), ho1, Options())[1]
+    assert "; 5 ms:" in note1 and "; 3 ms:" not in note1, note1
 
 
 def test_window_on_the_longest_candidate_is_only_bounded_and_the_default_stays():
