@@ -37,10 +37,10 @@ def register(subparsers) -> None:
                    help="minimum relative drop of the cross-validated error for adding an effect")
     p.add_argument("--max-effects", type=int, default=6)
     p.add_argument("--alpha-window", choices=["default", "timing", "identify"], default="identify",
-                   help="motor acceleration's derivative window and timing: identified on the fit bags (5-33 samples; 3-33 "
-                        "at <= 250 Hz, "
-                        "and the inertia torque's timing; the 20 ms default kept unless the tau_m baseline's CV error "
-                        "drops by --min-gain in most blocks, beyond one paired SE, at a window inside the range), "
+                   help="motor acceleration's derivative window and timing: identified on the fit bags (5-33 "
+                        "samples, 3-33 at <= 250 Hz, and the inertia torque's timing; the 20 ms default kept unless "
+                        "the tau_m baseline's CV error drops by --min-gain in most blocks, beyond one paired SE, at a "
+                        "window inside the range), "
                         "'timing' (20 ms, the timing column only) or 'default' (20 ms, nothing tried)")
     p.add_argument("--retime-window", choices=["default", "identify"], default="default",
                    help="derivative window of the logged speeds' re-timing (omega + tau omega'): 'default' (20 ms) or "

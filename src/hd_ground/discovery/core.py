@@ -166,7 +166,8 @@ class Options:
     standstill_sigmas: float = 3.0  # tau_m: rows with |omega_m| below this many speed-noise sigmas are left out
     min_fit_blocks: int = 3
     # the motor acceleration's derivative window and timing (choose_alpha_window): "identify" (window among 5-33
-    # samples, 3-33 at 250 Hz or slower, and the timing column, moved off the 20 ms default only when identified on the fit bags),
+    # samples, 3-33 at 250 Hz or slower, and the timing column, moved off the 20 ms default only when identified on
+    # the fit bags),
     # "timing" (20 ms, the timing column only), "default" (20 ms, nothing tried)
     alpha_window: str = "identify"
     # the derivative window of the logged speeds' re-timing omega + tau omega' (choose_retime_window): "default"

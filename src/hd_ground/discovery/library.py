@@ -328,7 +328,8 @@ def friction_candidates(ctx: LibraryContext) -> list[Candidate]:
         d_lo, d_hi = ctx.presliding_range
 
         def load_state(sh):
-            return [{"op": "prod", "factors": [dict(qabs), {"op": "var", "var": state_var("theta_m", float(sh["d_L"]))}]}]
+            s = {"op": "var", "var": state_var("theta_m", float(sh["d_L"]))}
+            return [{"op": "prod", "factors": [dict(qabs), s]}]
 
         d0 = float(np.sqrt(d_lo * d_hi))
         out.append(Candidate(
